@@ -1,0 +1,130 @@
+"""`ramp run` and `ramp check`: the supervisor's command line (SPEC section 5)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+from collections.abc import Sequence
+from types import FrameType
+
+from ramp import __version__
+from ramp.config import Config, check_config
+from ramp.errors import ConfigError
+
+log = logging.getLogger("ramp")
+
+
+def setup_logging(level: str) -> None:
+    """One line per event; timestamps only on a terminal (journald adds its own)."""
+    fmt = "%(levelname)s %(name)s: %(message)s"
+    if sys.stderr.isatty():
+        fmt = "%(asctime)s " + fmt
+    logging.basicConfig(level=getattr(logging, level.upper(), logging.INFO), format=fmt,
+                        stream=sys.stderr, force=True)
+
+
+def _print_errors(errors: list[ConfigError]) -> None:
+    for err in errors:
+        print(err, file=sys.stderr)
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    config, errors = check_config(args.file)
+    if errors:
+        _print_errors(errors)
+        print(f"{args.file}: {len(errors)} error{'s' if len(errors) != 1 else ''}",
+              file=sys.stderr)
+        return 1
+    assert config is not None
+    print(f"{args.file}: ok ({len(config.buses)} buses, {len(config.modules)} modules: "
+          f"{', '.join(config.modules) or 'none'})")
+    return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    setup_logging(args.log_level)
+    config, errors = check_config(args.config)
+    if errors:
+        _print_errors(errors)
+        return 2
+    assert config is not None
+    return run_supervisor(config, sim=args.sim, host=args.host, port=args.port)
+
+
+def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | None) -> int:
+    """Build, start and run until SIGTERM/SIGINT; motors are stopped before returning."""
+    from ramp.clock import MonotonicClock
+    from ramp.supervisor import Supervisor
+    from ramp.systemd import SystemdNotifier
+
+    clock = MonotonicClock()
+    if sim:
+        from ramp.sim import SimBackplane  # the one place ramp/ reaches firmware_like/
+
+        backplane = SimBackplane(config)
+        sup = Supervisor(config, clock, bus_factory=backplane.bus_factory, host=host,
+                         port=port)
+        backplane.attach(sup)
+    else:
+        sup = Supervisor(config, clock, host=host, port=port)
+    notifier = SystemdNotifier()
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        log.info("%s received: stopping every motor and exiting", signal.Signals(signum).name)
+        sup.scheduler.stop()
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+    try:
+        sup.start()
+    except OSError as exc:
+        log.error("cannot serve on %s:%s: %s", sup.server.host, sup.server.port, exc.strerror)
+        sup.shutdown()
+        return 1
+    from ramp.stall_guard import StallGuard
+
+    guard = StallGuard(sup, config.stall_limit)
+    guard.start()
+    notifier.attach(sup)
+    h, p = sup.server.address
+    print(f"ramp: ready on {h}:{p}", flush=True)
+    notifier.ready(f"serving on {h}:{p}")
+    try:
+        sup.scheduler.run()
+    finally:
+        notifier.stopping()
+        guard.stop()
+        sup.shutdown()
+        log.info("stopped: every motor commanded to zero")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="ramp", description=__doc__)
+    parser.add_argument("--version", action="version", version=f"ramp {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="run the supervisor")
+    run.add_argument("--config", default="ramp.yaml", help="config file (default ./ramp.yaml)")
+    run.add_argument("--sim", action="store_true",
+                     help="replace every bus (except those with sim: false) by its emulator")
+    run.add_argument("--host", default=None, help="address to serve on (default: from config)")
+    run.add_argument("--port", type=int, default=None, help="TCP port (0 picks a free one)")
+    run.add_argument("--log-level", default="info",
+                     choices=["debug", "info", "warning", "error"])
+    run.set_defaults(func=cmd_run)
+    check = sub.add_parser("check", help="validate a config file without touching hardware")
+    check.add_argument("file", nargs="?", default="ramp.yaml")
+    check.set_defaults(func=cmd_check)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    code: int = args.func(args)
+    return code
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

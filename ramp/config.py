@@ -1,0 +1,363 @@
+"""`ramp.yaml` -> validated, frozen configuration.
+
+Every error names the file, the line, the key path and what was expected, and all of them
+are collected in one pass so `ramp check` can show a team everything to fix at once.
+Drivers and modules declare their own keys (`Bus.fields`, `Bus.channel_fields`,
+`Module.devices`, `Module.settings`); this loader only walks the tree and applies them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import yaml
+
+from ramp.errors import ConfigError, ConfigErrors
+from ramp.hal import driver_class
+from ramp.hal.interfaces import Bus
+from ramp.layers.module import Module
+from ramp.layers.registry import module_class
+from ramp.schema import Field, FieldError, apply_fields
+
+
+class MarkedMap(dict[Any, Any]):
+    """A YAML mapping that remembers the line of itself and of each key."""
+
+    line: int = 0
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.lines: dict[Any, int] = {}
+        self.duplicates: list[tuple[Any, int]] = []
+
+
+class _Loader(yaml.SafeLoader):
+    pass
+
+
+def _construct_mapping(loader: _Loader, node: yaml.MappingNode) -> MarkedMap:
+    loader.flatten_mapping(node)
+    out = MarkedMap()
+    out.line = node.start_mark.line + 1
+    for key_node, value_node in node.value:
+        key = loader.construct_object(key_node, deep=True)
+        value = loader.construct_object(value_node, deep=True)
+        line = key_node.start_mark.line + 1
+        if key in out:
+            out.duplicates.append((key, line))
+        out[key] = value
+        out.lines[key] = line
+    return out
+
+
+_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+
+
+SERVER_FIELDS = {
+    "host": Field(str, "0.0.0.0", what="a host name or address"),
+    "port": Field(int, 5577, lo=0, hi=65535, what="a TCP port"),
+    "max_clients": Field(int, 8, lo=1, hi=1000),
+    "max_line": Field(int, 4096, lo=64, hi=1 << 20, what="a message length in bytes"),
+    "max_output": Field(int, 1 << 20, lo=4096, hi=1 << 28,
+                        what="bytes of unsent responses before a client is cut off"),
+}
+WATCHDOG_FIELDS = {
+    "timeout": Field(float, 1.0, lo=0.001, hi=60.0, what="a timeout in seconds"),
+}
+SCHEDULER_FIELDS = {
+    "rate_hz": Field(float, 100.0, lo=1.0, hi=1000.0, what="a tick rate in Hz"),
+    "stall_limit": Field(float, 0.25, lo=0.02, hi=10.0,
+                         what="seconds a tick may stall before motors are stopped"),
+}
+BUS_COMMON = {"driver", "sim"}
+
+
+@dataclass(frozen=True)
+class ServerConfig:
+    host: str = "0.0.0.0"
+    port: int = 5577
+    max_clients: int = 8
+    max_line: int = 4096
+    max_output: int = 1 << 20
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    name: str
+    driver: str
+    params: Mapping[str, Any]
+    sim: bool = True  # replaced by its emulator under --sim
+    line: int = 0
+
+
+@dataclass(frozen=True)
+class DeviceConfig:
+    name: str
+    bus: str
+    kind: str
+    channel: Mapping[str, Any]
+    params: Mapping[str, Any]
+    line: int = 0
+
+
+@dataclass(frozen=True)
+class ModuleConfig:
+    name: str
+    type: str
+    devices: Mapping[str, DeviceConfig]
+    settings: Mapping[str, Mapping[str, Any]]
+    line: int = 0
+
+
+@dataclass(frozen=True)
+class Config:
+    file: str
+    server: ServerConfig = ServerConfig()
+    watchdog_timeout: float = 1.0
+    rate_hz: float = 100.0
+    stall_limit: float = 0.25
+    buses: Mapping[str, BusConfig] = field(default_factory=dict)
+    modules: Mapping[str, ModuleConfig] = field(default_factory=dict)
+
+
+class _Checker:
+    """Walks the YAML tree collecting errors instead of stopping at the first."""
+
+    def __init__(self, file: str) -> None:
+        self.file = file
+        self.errors: list[ConfigError] = []
+
+    def err(self, key: str, line: int, message: str) -> None:
+        self.errors.append(ConfigError(message, file=self.file, line=line, key=key))
+
+    def block(self, parent: MarkedMap, key: str, path: str, fields: dict[str, Field],
+              skip: set[str] | frozenset[str] = frozenset()) -> dict[str, Any]:
+        """Check the mapping `parent[key]` against `fields`; returns values (defaults on error)."""
+        raw = parent.get(key)
+        line = parent.lines.get(key, parent.line)
+        if raw is None:
+            raw = MarkedMap()
+            raw.line = line
+        if not isinstance(raw, dict):
+            self.err(path, line, f"expected a mapping, got {_kind(raw)}")
+            return {k: f.default for k, f in fields.items() if not f.required}
+        return self.values(raw, path, fields, skip)
+
+    def values(self, raw: dict[Any, Any], path: str, fields: dict[str, Field],
+               skip: set[str] | frozenset[str] = frozenset()) -> dict[str, Any]:
+        lines = getattr(raw, "lines", {})
+        here = getattr(raw, "line", 0)
+        for dup, dline in getattr(raw, "duplicates", []):
+            self.err(f"{path}.{dup}", dline, "key given twice")
+        out: dict[str, Any] = {}
+        data = {k: v for k, v in raw.items() if k not in skip}
+        # Check key by key so that every bad key is reported, not just the first.
+        for k in data:
+            if k not in fields:
+                known = ", ".join(sorted([*fields, *skip])) or "none"
+                self.err(f"{path}.{k}", lines.get(k, here), f"unknown key (expected one of: {known})")
+        for k, f in fields.items():
+            try:
+                out.update(apply_fields({k: f}, {k: data[k]} if k in data else {}))
+            except FieldError as exc:
+                self.err(f"{path}.{exc.key}", lines.get(exc.key, here), exc.message)
+                if not f.required:
+                    out[k] = f.default
+        return out
+
+
+def _kind(v: Any) -> str:
+    if v is None:
+        return "nothing"
+    return {dict: "a mapping", list: "a list", str: "a string", int: "an integer",
+            float: "a number", bool: "true/false"}.get(type(v), type(v).__name__)
+
+
+def load_config(path: str | Path) -> Config:
+    """Load and check a config file; raises ConfigErrors listing every problem."""
+    config, errors = check_config(path)
+    if errors or config is None:
+        raise ConfigErrors(errors)
+    return config
+
+
+def check_config(path: str | Path) -> tuple[Config | None, list[ConfigError]]:
+    """(config or None, every error found) without touching any hardware."""
+    name = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        return None, [ConfigError(f"cannot read: {exc.strerror}", file=name)]
+    return parse_config(text, name)
+
+
+def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, list[ConfigError]]:
+    try:
+        root = yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = mark.line + 1 if mark is not None else 0
+        problem = getattr(exc, "problem", None) or str(exc)
+        return None, [ConfigError(f"not valid YAML: {problem}", file=name, line=line)]
+    c = _Checker(name)
+    if root is None:
+        root = MarkedMap()
+        root.line = 1
+    if not isinstance(root, MarkedMap):
+        c.err("", 1, f"expected a mapping of sections at the top, got {_kind(root)}")
+        return None, c.errors
+    top = {"server", "watchdog", "scheduler", "buses", "modules"}
+    for k in root:
+        if k not in top:
+            c.err(str(k), root.lines.get(k, 1),
+                  f"unknown section (expected one of: {', '.join(sorted(top))})")
+    for dup, dline in root.duplicates:
+        c.err(str(dup), dline, "section given twice")
+    server = c.block(root, "server", "server", SERVER_FIELDS)
+    wd = c.block(root, "watchdog", "watchdog", WATCHDOG_FIELDS)
+    sched = c.block(root, "scheduler", "scheduler", SCHEDULER_FIELDS)
+    buses, bus_classes = _buses(c, root)
+    modules = _modules(c, root, buses, bus_classes)
+    if c.errors:
+        return None, c.errors
+    cfg = Config(
+        file=name,
+        server=ServerConfig(**server),
+        watchdog_timeout=wd["timeout"],
+        rate_hz=sched["rate_hz"],
+        stall_limit=sched["stall_limit"],
+        buses=MappingProxyType(buses),
+        modules=MappingProxyType(modules),
+    )
+    return cfg, []
+
+
+def _buses(c: _Checker, root: MarkedMap) -> tuple[dict[str, BusConfig], dict[str, type[Bus]]]:
+    out: dict[str, BusConfig] = {}
+    classes: dict[str, type[Bus]] = {}
+    raw = root.get("buses")
+    if raw is None:
+        return out, classes
+    if not isinstance(raw, MarkedMap):
+        c.err("buses", root.lines.get("buses", 0), f"expected a mapping, got {_kind(raw)}")
+        return out, classes
+    for dup, dline in raw.duplicates:
+        c.err(f"buses.{dup}", dline, "bus given twice")
+    for name, entry in raw.items():
+        path = f"buses.{name}"
+        line = raw.lines.get(name, raw.line)
+        if not isinstance(entry, MarkedMap):
+            c.err(path, line, f"expected a mapping with a driver, got {_kind(entry)}")
+            continue
+        driver = entry.get("driver")
+        if not isinstance(driver, str):
+            c.err(f"{path}.driver", entry.lines.get("driver", entry.line),
+                  "missing; expected a driver name (sabertooth, phidget, can, sim)")
+            continue
+        try:
+            cls = driver_class(driver)
+        except ValueError as exc:
+            c.err(f"{path}.driver", entry.lines.get("driver", entry.line), str(exc))
+            continue
+        except ImportError as exc:
+            c.err(f"{path}.driver", entry.lines.get("driver", entry.line),
+                  f"driver {driver} cannot be loaded: {exc}")
+            continue
+        sim = entry.get("sim", True)
+        if not isinstance(sim, bool):
+            c.err(f"{path}.sim", entry.lines.get("sim", entry.line), f"{sim!r} is not true or false")
+            sim = True
+        params = c.values(entry, path, dict(cls.fields), skip=BUS_COMMON)
+        out[str(name)] = BusConfig(str(name), driver, MappingProxyType(params), sim, line)
+        classes[str(name)] = cls
+    return out, classes
+
+
+def _modules(c: _Checker, root: MarkedMap, buses: dict[str, BusConfig],
+             bus_classes: dict[str, type[Bus]]) -> dict[str, ModuleConfig]:
+    out: dict[str, ModuleConfig] = {}
+    raw = root.get("modules")
+    if raw is None:
+        return out
+    if not isinstance(raw, MarkedMap):
+        c.err("modules", root.lines.get("modules", 0), f"expected a mapping, got {_kind(raw)}")
+        return out
+    used: dict[tuple[str, str, tuple[Any, ...]], str] = {}
+    for name, entry in raw.items():
+        path = f"modules.{name}"
+        line = raw.lines.get(name, raw.line)
+        if name == "robot":
+            c.err(path, line, "`robot` is reserved for robot-level requests")
+            continue
+        if not isinstance(entry, MarkedMap):
+            c.err(path, line, f"expected a mapping of devices, got {_kind(entry)}")
+            continue
+        type_name = entry.get("type", name)
+        try:
+            cls = module_class(str(type_name))
+        except ValueError as exc:
+            c.err(f"{path}.type", entry.lines.get("type", line), str(exc))
+            continue
+        mod = _module(c, path, str(name), str(type_name), cls, entry, buses, bus_classes, used)
+        if mod is not None:
+            out[str(name)] = mod
+    return out
+
+
+def _module(c: _Checker, path: str, name: str, type_name: str, cls: type[Module],
+            entry: MarkedMap, buses: dict[str, BusConfig], bus_classes: dict[str, type[Bus]],
+            used: dict[tuple[str, str, tuple[Any, ...]], str]) -> ModuleConfig | None:
+    devices: dict[str, DeviceConfig] = {}
+    settings: dict[str, Mapping[str, Any]] = {}
+    for dup, dline in entry.duplicates:
+        c.err(f"{path}.{dup}", dline, "key given twice")
+    for key in entry:
+        if key != "type" and key not in cls.devices and key not in cls.settings:
+            expected = sorted([*cls.devices, *cls.settings, "type"])
+            c.err(f"{path}.{key}", entry.lines.get(key, entry.line),
+                  f"unknown device or setting for a {type_name} module (expected one of: "
+                  f"{', '.join(expected)})")
+    for block, fields in cls.settings.items():
+        settings[block] = MappingProxyType(c.block(entry, block, f"{path}.{block}", fields))
+    for dev, spec in cls.devices.items():
+        dpath = f"{path}.{dev}"
+        raw = entry.get(dev)
+        dline = entry.lines.get(dev, entry.line)
+        if raw is None:
+            c.err(dpath, dline, f"missing; a {type_name} module needs a {spec.kind} device "
+                                f"`{dev}` ({spec.help or 'see the README'})")
+            continue
+        if not isinstance(raw, MarkedMap):
+            c.err(dpath, dline, f"expected a mapping with a bus, got {_kind(raw)}")
+            continue
+        bus = raw.get("bus")
+        if bus not in buses:
+            known = ", ".join(sorted(buses)) or "none defined"
+            c.err(f"{dpath}.bus", raw.lines.get("bus", raw.line),
+                  f"{bus!r} is not a bus (known: {known})" if bus is not None
+                  else f"missing; expected a bus name (known: {known})")
+            continue
+        bcls = bus_classes[bus]
+        if spec.kind not in bcls.channel_fields:
+            c.err(f"{dpath}.bus", raw.lines.get("bus", raw.line),
+                  f"bus {bus} (driver {bcls.driver_name}) has no {spec.kind} channels, which "
+                  f"{dev} needs")
+            continue
+        ch_fields = bcls.channel_fields[spec.kind]
+        all_fields = {**ch_fields, **spec.fields}
+        values = c.values(raw, dpath, all_fields, skip={"bus"})
+        channel = {k: values[k] for k in ch_fields if k in values}
+        params = {k: values[k] for k in spec.fields if k in values}
+        ident = (bus, spec.kind, tuple(sorted(channel.items())))
+        if ch_fields and ident in used:
+            c.err(dpath, dline, f"uses the same {spec.kind} channel of bus {bus} as "
+                                f"{used[ident]}")
+        used[ident] = f"{name}.{dev}"
+        devices[dev] = DeviceConfig(dev, bus, spec.kind, MappingProxyType(channel),
+                                    MappingProxyType(params), dline)
+    return ModuleConfig(name, type_name, MappingProxyType(devices), MappingProxyType(settings),
+                        entry.line)

@@ -1,0 +1,1 @@
+"""The distribution layers: robot (watchdog, arbitration, health) and module routers."""

@@ -1,0 +1,24 @@
+"""Module type registry: YAML `modules:` names (or their `type:`) -> module class, lazily."""
+
+from __future__ import annotations
+
+import importlib
+
+from ramp.layers.module import Module
+
+MODULE_TYPES: dict[str, tuple[str, str]] = {
+    "base": ("ramp.layers.base", "BaseModule"),
+    "ble": ("ramp.layers.ble", "BleModule"),
+    "demo": ("ramp.layers.demo", "DemoModule"),
+}
+
+
+def module_class(type_name: str) -> type[Module]:
+    try:
+        mod, cls = MODULE_TYPES[type_name]
+    except KeyError:
+        raise ValueError(
+            f"unknown module type {type_name!r} (expected one of: "
+            f"{', '.join(sorted(MODULE_TYPES))})") from None
+    found: type[Module] = getattr(importlib.import_module(mod), cls)
+    return found

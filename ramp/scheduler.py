@@ -1,0 +1,273 @@
+"""The one loop: a fixed-rate tick scheduler that services sockets and ports between ticks.
+
+Why this shape (see shared/reference/platform-limits.md): an absolute-deadline loop waiting in
+`select.select` (microsecond timeout) matches C `clock_nanosleep`, while epoll and asyncio
+round their timeouts up to whole milliseconds (about 0.6 ms late every tick). Input is
+dispatched the moment it arrives during the wait, so a request is answered on arrival, not at
+the next tick. Missed ticks are skipped, never replayed in a burst, and every overrun names
+the task that ate the budget.
+
+With a virtual clock the wait polls I/O once without blocking and jumps the clock to the next
+deadline, so simulated minutes pass in seconds and runs repeat exactly.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import select
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from ramp.clock import Clock, VirtualClock
+
+log = logging.getLogger("ramp.scheduler")
+
+TaskFn = Callable[[float, float], None]
+IoCallback = Callable[[], None]
+
+
+@dataclass
+class ScheduledTask:
+    """A periodic task: runs every `divisor` base ticks with `(now, dt)`."""
+
+    name: str
+    divisor: int
+    fn: TaskFn
+    last_run: float | None = None
+    runs: int = 0
+    errors: int = 0
+    total_s: float = 0.0
+    max_s: float = 0.0
+    enabled: bool = True
+
+
+@dataclass
+class TickStats:
+    """Lateness and overrun accounting, exposed through `robot.get`."""
+
+    window: int = 6000
+    late_us: deque[float] = field(default_factory=deque)
+    max_late_us: float = 0.0
+    ticks: int = 0
+    overruns: int = 0
+    skipped: int = 0
+    last_overrun_task: str = ""
+
+    def record(self, late_s: float) -> None:
+        us = late_s * 1e6
+        self.late_us.append(us)
+        if len(self.late_us) > self.window:
+            self.late_us.popleft()
+        self.max_late_us = max(self.max_late_us, us)
+        self.ticks += 1
+
+    def percentiles(self) -> tuple[float, float, float]:
+        """(p50, p99, max) lateness in µs over the recent window; max is since start."""
+        if not self.late_us:
+            return (0.0, 0.0, self.max_late_us)
+        data = sorted(self.late_us)
+        return (_pick(data, 0.50), _pick(data, 0.99), self.max_late_us)
+
+
+def _pick(data: list[float], q: float) -> float:
+    return data[min(len(data) - 1, int(q * len(data)))]
+
+
+class Scheduler:
+    """Runs tasks at integer divisors of a base rate, and I/O callbacks between ticks."""
+
+    def __init__(self, clock: Clock, rate_hz: float = 100.0,
+                 overrun_log_interval: float = 5.0) -> None:
+        if not (math.isfinite(rate_hz) and 0 < rate_hz <= 2000):
+            raise ValueError(f"scheduler rate {rate_hz} Hz is outside 0-2000")
+        self.clock = clock
+        self.rate_hz = float(rate_hz)
+        self.period = 1.0 / self.rate_hz
+        self.tasks: list[ScheduledTask] = []
+        self.stats = TickStats()
+        self._readers: dict[int, IoCallback] = {}
+        self._writers: dict[int, IoCallback] = {}
+        self._next: float | None = None
+        self._index = 0
+        self._stop = False
+        self.current_task: str = ""
+        #: perf_counter() of the loop's last sign of progress; the stall guard reads it.
+        self.alive_at: float = 0.0
+        self._overrun_log_interval = overrun_log_interval
+        self._last_overrun_log = -math.inf
+        self._overruns_unlogged = 0
+
+    # -- registration -------------------------------------------------------------------------
+    def add_task(self, name: str, rate_hz: float, fn: TaskFn) -> ScheduledTask:
+        """Run `fn(now, dt)` at `rate_hz`, which must divide the base rate."""
+        ratio = self.rate_hz / rate_hz
+        divisor = round(ratio)
+        if divisor < 1 or abs(ratio - divisor) > 1e-6:
+            raise ValueError(
+                f"task {name}: {rate_hz} Hz does not divide the base rate {self.rate_hz:g} Hz")
+        task = ScheduledTask(name, divisor, fn)
+        self.tasks.append(task)
+        return task
+
+    def remove_task(self, task: ScheduledTask) -> None:
+        if task in self.tasks:
+            self.tasks.remove(task)
+
+    def add_reader(self, fd: int, callback: IoCallback) -> None:
+        self._readers[fd] = callback
+
+    def remove_reader(self, fd: int) -> None:
+        self._readers.pop(fd, None)
+
+    def add_writer(self, fd: int, callback: IoCallback) -> None:
+        self._writers[fd] = callback
+
+    def remove_writer(self, fd: int) -> None:
+        self._writers.pop(fd, None)
+
+    # -- running ------------------------------------------------------------------------------
+    def stop(self) -> None:
+        """Ask `run` to return after the current iteration."""
+        self._stop = True
+
+    def run(self, until: Callable[[], bool] | None = None) -> None:
+        """Tick until `stop()` is called or `until()` is true."""
+        self._stop = False
+        while not self._stop and not (until is not None and until()):
+            self.run_once()
+
+    def run_for(self, seconds: float) -> None:
+        """Tick for `seconds` of clock time (virtual or real)."""
+        end = self.clock.now() + seconds
+        self.run(lambda: self.clock.now() >= end - 1e-9)
+
+    def run_once(self) -> None:
+        """Exactly one iteration: wait for the next deadline servicing I/O, then tick."""
+        if self._next is None:
+            self._next = self.clock.now()
+        self._wait(self._next)
+        self._tick(self._next)
+
+    def poll_io(self, timeout: float = 0.0) -> int:
+        """Dispatch ready I/O once; returns how many callbacks ran."""
+        self.alive_at = time.perf_counter()
+        if not self._readers and not self._writers:
+            return 0
+        try:
+            r, w, _ = select.select(list(self._readers), list(self._writers), [], timeout)
+        except InterruptedError:  # pragma: no cover - PEP 475 retries; kept for safety
+            return 0
+        except (OSError, ValueError):
+            self._drop_bad_fds()
+            return 0
+        for fd in r:
+            cb = self._readers.get(fd)
+            if cb is not None:
+                self._guard(cb, f"input on fd {fd}")
+        for fd in w:
+            cb = self._writers.get(fd)
+            if cb is not None:
+                self._guard(cb, f"output on fd {fd}")
+        self.alive_at = time.perf_counter()
+        return len(r) + len(w)
+
+    def _wait(self, deadline: float) -> None:
+        if isinstance(self.clock, VirtualClock):
+            self.poll_io(0.0)
+            if self.clock.now() < deadline:
+                self.clock.set(deadline)
+            return
+        while True:
+            remaining = deadline - self.clock.now()
+            if remaining <= 0:
+                self.poll_io(0.0)
+                return
+            if not self._readers and not self._writers:
+                # Nothing to watch: sleep the remainder with a µs-precise wait.
+                self.alive_at = time.perf_counter()
+                select.select([], [], [], remaining)
+                continue
+            self.poll_io(remaining)
+
+    def _tick(self, deadline: float) -> None:
+        now = self.clock.now()
+        late = max(0.0, now - deadline)
+        self.stats.record(late)
+        missed = int(late // self.period)
+        worst_name, worst_s = "", 0.0
+        for task in list(self.tasks):
+            if not task.enabled or self._index % task.divisor:
+                continue
+            tdt = task.divisor * self.period if task.last_run is None else now - task.last_run
+            task.last_run = now
+            self.current_task = task.name
+            t0 = self.clock.now()
+            self.alive_at = time.perf_counter()
+            try:
+                task.fn(now, tdt)
+            except Exception:
+                task.errors += 1
+                log.exception("task %s raised; the loop goes on", task.name)
+            spent = self.clock.now() - t0
+            task.runs += 1
+            task.total_s += spent
+            task.max_s = max(task.max_s, spent)
+            if spent > worst_s:
+                worst_name, worst_s = task.name, spent
+        self.current_task = ""
+        # The next deadline: skip every tick that is already in the past.
+        if missed:
+            # Late before any task ran: the time went to I/O handling or to the OS.
+            self.stats.overruns += 1
+            self.stats.skipped += missed
+            self.stats.last_overrun_task = "the wait before the tick (I/O handling or the OS)"
+            self._log_overrun(late)
+        self._index += 1 + missed
+        self._next = deadline + (1 + missed) * self.period
+        # Tasks that ran past the next deadline: the overrun is this tick's, name its task.
+        after = self.clock.now()
+        if after > self._next + self.period:
+            extra = int((after - self._next) // self.period)
+            self.stats.overruns += 1
+            self.stats.skipped += extra
+            self.stats.last_overrun_task = self._blame(worst_name, worst_s)
+            self._log_overrun(after - deadline)
+            self._index += extra
+            self._next += extra * self.period
+
+    def _blame(self, name: str, spent: float) -> str:
+        return f"{name} ({spent * 1e3:.1f} ms)" if name else "no task (the OS)"
+
+    def _log_overrun(self, late: float) -> None:
+        """Throttled: one warning per interval, counting the ones it held back."""
+        self._overruns_unlogged += 1
+        now = time.perf_counter()
+        if now - self._last_overrun_log >= self._overrun_log_interval:
+            log.warning("tick overrun: %.1f ms late; slowest task %s (%d overruns since last"
+                        " report)", late * 1e3, self.stats.last_overrun_task,
+                        self._overruns_unlogged)
+            self._last_overrun_log = now
+            self._overruns_unlogged = 0
+
+    def _guard(self, cb: IoCallback, what: str) -> None:
+        self.current_task = what
+        self.alive_at = time.perf_counter()
+        try:
+            cb()
+        except Exception:
+            log.exception("I/O callback (%s) raised; the loop goes on", what)
+        finally:
+            self.current_task = ""
+
+    def _drop_bad_fds(self) -> None:
+        """A closed fd left registered would make select fail forever: find and drop it."""
+        for table in (self._readers, self._writers):
+            for fd in list(table):
+                try:
+                    select.select([fd], [], [], 0)
+                except (OSError, ValueError):
+                    log.error("dropping closed file descriptor %d from the loop", fd)
+                    table.pop(fd, None)
