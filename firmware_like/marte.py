@@ -1,0 +1,409 @@
+"""The MARTE physics model: the world the emulators and the sim driver move and read.
+
+One object holds the arena, the skid-steer Base, its battery and the Bucket Ladder
+Excavator. It is advanced only by `step(dt)`, which integrates every state from
+differentials, so a run depends on nothing but the sequence of commands, the steps and the
+seed. Device emulators (Sabertooth over a pty, ...) and the HAL-level `sim` driver address
+its signals by the YAML names `module.device`; `ramp/` never imports this file except
+through the one simulation entry point.
+
+Frames and signs (seen from above, the collector wall x = 0 at the bottom of the page):
+
+- x runs along the arena's 7.38 m length, from the collector wall (x = 0) towards the
+  digging region; y runs across its 3.88 m width and points to the RIGHT of +x.
+- heading 0 faces +x; heading grows CLOCKWISE seen from above, so heading 90 deg faces +y.
+  A positive yaw rate is a clockwise turn, i.e. turning right (SPEC 2.3: drive direction 90
+  spins clockwise). This is the x-forward, y-right, yaw-clockwise convention of NED frames.
+- the robot's front carries the bucket ladder; its rear (-x at heading 0) carries the two
+  docking buttons at its rear-left and rear-right corners and dumps over the rear.
+
+Wiring as built (the YAML compensates with polarity): positive duty rolls a LEFT wheel
+forward but a RIGHT wheel backward (mirrored mounting); `ble.chain_left` positive and
+`ble.chain_right` negative run the chain in its digging direction; `ble.lift_motor`
+positive extends the actuator, raising the bin.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+import random
+from collections.abc import Iterable
+
+from firmware_like.marte_params import MarteParams
+
+LEFT_WHEELS = ("base.lf_wheel", "base.lb_wheel")
+RIGHT_WHEELS = ("base.rf_wheel", "base.rb_wheel")
+WHEELS = LEFT_WHEELS + RIGHT_WHEELS
+CHAINS = ("ble.chain_left", "ble.chain_right")
+LIFT = "ble.lift_motor"
+MOTORS = WHEELS + CHAINS + (LIFT,)
+ANALOG_INPUTS = ("base.battery", "ble.lift_pot")
+DIGITAL_INPUTS = ("base.l_button", "base.r_button")
+DIGITAL_OUTPUTS = ("base.user_led", "base.led_high", "base.led_mid", "base.led_low")
+BRIDGE_INPUTS = ("ble.load_cell",)
+
+# Sign from a motor's duty to its useful direction (wheel forward, chain digging, lift up).
+_MOUNT: dict[str, float] = {
+    "base.lf_wheel": 1.0, "base.lb_wheel": 1.0,
+    "base.rf_wheel": -1.0, "base.rb_wheel": -1.0,
+    "ble.chain_left": 1.0, "ble.chain_right": -1.0,
+    "ble.lift_motor": 1.0,
+}
+
+REGIONS = ("start", "obstacle", "dig")
+
+
+def _known(name: str, kind: str, known: Iterable[str]) -> None:
+    """Raise KeyError naming every valid signal, so a typo in YAML is easy to spot."""
+    names = tuple(known)
+    if name not in names:
+        raise KeyError(f"unknown {kind} {name!r}; known: {', '.join(names)}")
+
+
+class MarteWorld:
+    """MARTE in the RMC arena: pose, motors, battery, lift, bin, collector.
+
+    Public state for tests and benchmarks: `x`, `y` (m, centre of the footprint),
+    `heading` (rad, clockwise from +x, in [-pi, pi]), `heading_deg`, `bin_kg`,
+    `delivered_kg`, `spilled_kg`, `excavated_kg`, `lift_pos` (0 retracted/digging ..
+    1 extended/dumping), `battery_voltage` (terminal, V), `battery_current` (A),
+    `battery_soc` (0..1) and `time` (s of simulated time).
+    """
+
+    def __init__(self, params: MarteParams | None = None, seed: int = 0) -> None:
+        self.params = params if params is not None else MarteParams()
+        p = self.params
+        self._rng = random.Random(seed)
+        self._ocv_soc = [s for s, _ in p.ocv_curve]
+        self._ocv_volts = [v * p.battery_cells for _, v in p.ocv_curve]
+        self._duty: dict[str, float] = dict.fromkeys(MOTORS, 0.0)
+        # Each motor's speed as a fraction of its free speed at `motor_ref_voltage`, in the
+        # motor's own sense (positive duty -> positive speed).
+        self._speed: dict[str, float] = dict.fromkeys(MOTORS, 0.0)
+        self._outputs: dict[str, bool] = dict.fromkeys(DIGITAL_OUTPUTS, False)
+        self._unplugged: set[str] = set()
+        self._lift_jammed = False
+        self._lift_blocked = False
+        self._digging = False
+        self._chain_dig_speed = 0.0
+        self.time = 0.0
+        # Start in the middle of the starting region, facing the digging region.
+        self.x = p.start_region_end / 2.0 + 0.1
+        self.y = p.arena_width / 2.0
+        self.heading = 0.0
+        self.lift_pos = 0.0
+        self.bin_kg = 0.0
+        self.delivered_kg = 0.0
+        self.spilled_kg = 0.0
+        self.excavated_kg = 0.0
+        self.battery_soc = p.initial_soc
+        self.battery_current = p.idle_current
+        self.battery_voltage = self._ocv(self.battery_soc) - self.battery_current * (
+            p.battery_r_internal)
+        self._noise: dict[str, float] = {}
+        self._sample_noise()
+
+    # ---- commands and readings (the SimWorld protocol of ramp/hal/simio.py) -------------
+
+    def set_motor(self, name: str, duty: float) -> None:
+        """Command one motor; duty is clamped to -1..1 as a motor controller would."""
+        _known(name, "motor", MOTORS)
+        duty = float(duty)
+        if not math.isfinite(duty):
+            raise ValueError(f"duty for {name} must be finite, got {duty!r}")
+        self._duty[name] = max(-1.0, min(1.0, duty))
+
+    def duty(self, name: str) -> float:
+        """The duty last commanded to a motor (what the controller is applying now)."""
+        _known(name, "motor", MOTORS)
+        return self._duty[name]
+
+    def read_analog(self, name: str) -> float:
+        """Volts at the ADC pin, as sampled at the last step."""
+        _known(name, "analog input", ANALOG_INPUTS)
+        p = self.params
+        if name == "base.battery":
+            volts = p.v_sensor_offset + p.v_sensor_gain * self.battery_voltage
+        else:
+            span = p.pot_extended_volts - p.pot_retracted_volts
+            volts = p.pot_retracted_volts + span * self.lift_pos
+        return volts + self._noise[name]
+
+    def read_digital(self, name: str) -> bool:
+        """Docking buttons: closed while that rear corner touches the collector wall x = 0."""
+        _known(name, "digital input", DIGITAL_INPUTS)
+        rear_left, rear_right = self._corners()[2:]
+        corner = rear_left if name == "base.l_button" else rear_right
+        return corner[0] <= self.params.button_travel
+
+    def write_digital(self, name: str, on: bool) -> None:
+        """Set an LED output."""
+        _known(name, "digital output", DIGITAL_OUTPUTS)
+        self._outputs[name] = bool(on)
+
+    def output(self, name: str) -> bool:
+        """Read back an LED output."""
+        _known(name, "digital output", DIGITAL_OUTPUTS)
+        return self._outputs[name]
+
+    def read_bridge(self, name: str) -> float:
+        """Load cell ratio in mV/V: an offset for the empty bin plus the regolith's weight."""
+        _known(name, "bridge input", BRIDGE_INPUTS)
+        p = self.params
+        return p.load_cell_offset + p.load_cell_gain * self.bin_kg + self._noise[name]
+
+    def bus_present(self, bus: str) -> bool:
+        """False between `unplug(bus)` and `replug(bus)`; any bus name is accepted."""
+        return bus not in self._unplugged
+
+    # ---- test and benchmark controls -------------------------------------------------------
+
+    def unplug(self, bus: str) -> None:
+        """Make a bus disappear, as a pulled USB cable would."""
+        self._unplugged.add(bus)
+
+    def replug(self, bus: str) -> None:
+        """Bring an unplugged bus back."""
+        self._unplugged.discard(bus)
+
+    def jam_lift(self, jammed: bool) -> None:
+        """Stall the lift actuator in place (it draws stall current and does not move)."""
+        self._lift_jammed = bool(jammed)
+
+    def place(self, x: float, y: float, heading_deg: float) -> None:
+        """Set the pose; the footprint must lie inside the arena."""
+        p = self.params
+        old = (self.x, self.y, self.heading)
+        self.x, self.y = float(x), float(y)
+        self.heading = math.remainder(math.radians(heading_deg), 2.0 * math.pi)
+        xs = [c[0] for c in self._corners()]
+        ys = [c[1] for c in self._corners()]
+        eps = 1e-9
+        if min(xs) < -eps or max(xs) > p.arena_length + eps or min(ys) < -eps or (
+                max(ys) > p.arena_width + eps):
+            self.x, self.y, self.heading = old
+            raise ValueError(f"pose ({x}, {y}, {heading_deg} deg) puts the robot outside "
+                             f"the {p.arena_length} x {p.arena_width} m arena")
+
+    # ---- derived state ------------------------------------------------------------------------
+
+    @property
+    def heading_deg(self) -> float:
+        """Heading in degrees, clockwise from +x, in [-180, 180]."""
+        return math.degrees(self.heading)
+
+    @property
+    def lift_jammed(self) -> bool:
+        return self._lift_jammed
+
+    @property
+    def digging(self) -> bool:
+        """True while the last step moved regolith into the bin."""
+        return self._digging
+
+    def wheel_speed(self, name: str) -> float:
+        """Ground speed of one wheel in m/s, positive rolling the robot forward."""
+        _known(name, "wheel", WHEELS)
+        return self._wheel_ground_speed(name)
+
+    def motor_speed(self, name: str) -> float:
+        """Motor speed as a fraction of free speed at the reference voltage, in duty sense."""
+        _known(name, "motor", MOTORS)
+        return self._speed[name]
+
+    def region(self) -> str:
+        """Arena region of the robot's centre: "start", "obstacle" or "dig"."""
+        return self._region_of(self.x)
+
+    def front_x(self) -> float:
+        """x of the middle of the front edge (where the bucket ladder is)."""
+        return self.x + 0.5 * self.params.robot_length * math.cos(self.heading)
+
+    def rear_x(self) -> float:
+        """x of the middle of the rear edge (where the bin dumps and the buttons sit)."""
+        return self.x - 0.5 * self.params.robot_length * math.cos(self.heading)
+
+    def at_collector(self) -> bool:
+        """True when regolith dumped now would land in the collector bin."""
+        p = self.params
+        rear_left, rear_right = self._corners()[2:]
+        if self.rear_x() > p.dump_reach:
+            return False
+        lo = min(rear_left[1], rear_right[1])
+        hi = max(rear_left[1], rear_right[1])
+        half = p.collector_width / 2.0
+        return hi > p.collector_y - half and lo < p.collector_y + half
+
+    def state(self) -> dict[str, float | str | bool]:
+        """A snapshot of everything a benchmark would log."""
+        return {
+            "time": self.time, "x": self.x, "y": self.y, "heading_deg": self.heading_deg,
+            "region": self.region(), "lift_pos": self.lift_pos, "bin_kg": self.bin_kg,
+            "delivered_kg": self.delivered_kg, "spilled_kg": self.spilled_kg,
+            "excavated_kg": self.excavated_kg, "battery_voltage": self.battery_voltage,
+            "battery_current": self.battery_current, "battery_soc": self.battery_soc,
+            "digging": self._digging, "lift_jammed": self._lift_jammed,
+        }
+
+    # ---- integration --------------------------------------------------------------------------
+
+    def step(self, dt: float) -> None:
+        """Advance the world by dt seconds, in pieces no longer than `params.max_step`."""
+        dt = float(dt)
+        if not math.isfinite(dt) or dt < 0.0:
+            raise ValueError(f"dt must be a finite number >= 0, got {dt!r}")
+        if dt == 0.0:
+            return
+        pieces = max(1, math.ceil(dt / self.params.max_step - 1e-9))
+        h = dt / pieces
+        for _ in range(pieces):
+            self._substep(h)
+        self._sample_noise()
+
+    def _substep(self, dt: float) -> None:
+        p = self.params
+        # Motors: first-order lag toward duty x (rail voltage / reference voltage). The rail
+        # voltage is the previous piece's, which keeps the battery-motor loop explicit.
+        volt_factor = max(0.0, self.battery_voltage) / p.motor_ref_voltage
+        alpha = 1.0 - math.exp(-dt / p.motor_time_constant)
+        for name in MOTORS:
+            target = self._duty[name] * volt_factor
+            self._speed[name] += (target - self._speed[name]) * alpha
+        self._move_chassis(dt)
+        self._move_lift(dt)
+        self._dig_and_dump(dt)
+        self._drain_battery(dt)
+        self.time += dt
+
+    def _move_chassis(self, dt: float) -> None:
+        p = self.params
+        left = sum(self._wheel_ground_speed(n) for n in LEFT_WHEELS) / len(LEFT_WHEELS)
+        right = sum(self._wheel_ground_speed(n) for n in RIGHT_WHEELS) / len(RIGHT_WHEELS)
+        v = 0.5 * (left + right)
+        yaw_rate = p.skid_efficiency * (left - right) / p.track_width  # + is clockwise
+        mid = self.heading + 0.5 * yaw_rate * dt
+        self.x += v * math.cos(mid) * dt
+        self.y += v * math.sin(mid) * dt
+        self.heading = math.remainder(self.heading + yaw_rate * dt, 2.0 * math.pi)
+        self._clamp_to_arena()
+
+    def _clamp_to_arena(self) -> None:
+        """Walls stop the robot: push the footprint back inside, keeping its heading."""
+        p = self.params
+        corners = self._corners()
+        xs = [c[0] for c in corners]
+        ys = [c[1] for c in corners]
+        if min(xs) < 0.0:
+            self.x -= min(xs)
+        elif max(xs) > p.arena_length:
+            self.x -= max(xs) - p.arena_length
+        if min(ys) < 0.0:
+            self.y -= min(ys)
+        elif max(ys) > p.arena_width:
+            self.y -= max(ys) - p.arena_width
+
+    def _move_lift(self, dt: float) -> None:
+        p = self.params
+        duty = self._duty[LIFT]
+        at_top = self.lift_pos >= 1.0 and duty > 0.0
+        at_bottom = self.lift_pos <= 0.0 and duty < 0.0
+        if self._lift_jammed or at_top or at_bottom:
+            # A stalled screw does not turn: the motor is held at zero speed.
+            self._speed[LIFT] = 0.0
+            self._lift_blocked = duty != 0.0
+            return
+        self._lift_blocked = False
+        pos = self.lift_pos + self._speed[LIFT] / p.lift_stroke_time * dt
+        if pos >= 1.0 or pos <= 0.0:
+            pos = min(1.0, max(0.0, pos))
+            self._speed[LIFT] = 0.0
+        self.lift_pos = pos
+
+    def _dig_and_dump(self, dt: float) -> None:
+        p = self.params
+        # Both chain motors drive one belt: its speed is their mean in the digging sense.
+        chain = sum(_MOUNT[n] * self._speed[n] for n in CHAINS) / len(CHAINS)
+        self._chain_dig_speed = max(0.0, chain)
+        in_soil = self.lift_pos < p.dig_lift_max
+        in_dig_region = self.front_x() >= p.dig_region_start
+        self._digging = False
+        if chain > 0.0 and in_soil and in_dig_region:
+            room = max(0.0, p.bin_capacity - self.bin_kg)
+            dug = min(room, p.dig_rate * chain * dt)
+            if dug > 0.0:
+                self.bin_kg += dug
+                self.excavated_kg += dug
+                self._digging = True
+        if self.lift_pos > p.dump_lift_min and self.bin_kg > 0.0:
+            out = min(self.bin_kg, p.dump_rate * dt)
+            self.bin_kg -= out
+            if self.at_collector():
+                self.delivered_kg += out
+            else:
+                self.spilled_kg += out
+
+    def _drain_battery(self, dt: float) -> None:
+        p = self.params
+        current = p.idle_current
+        for name in WHEELS:
+            current += abs(self._duty[name]) * p.wheel_current
+        for name in CHAINS:
+            current += abs(self._duty[name]) * p.chain_current
+            if self._digging:
+                current += p.dig_current * self._chain_dig_speed
+        lift_amps = p.lift_stall_current if self._lift_blocked else p.lift_current
+        current += abs(self._duty[LIFT]) * lift_amps
+        self.battery_current = current
+        self.battery_soc = max(0.0, self.battery_soc - current * dt / p.battery_capacity_c)
+        ocv = self._ocv(self.battery_soc)
+        self.battery_voltage = max(0.0, ocv - current * p.battery_r_internal)
+
+    # ---- helpers ------------------------------------------------------------------------------
+
+    def _wheel_ground_speed(self, name: str) -> float:
+        return _MOUNT[name] * self._speed[name] * self.params.wheel_free_speed
+
+    def _ocv(self, soc: float) -> float:
+        """Open-circuit voltage of the pack, interpolated in the per-cell curve."""
+        socs, volts = self._ocv_soc, self._ocv_volts
+        soc = min(1.0, max(0.0, soc))
+        i = bisect.bisect_right(socs, soc)
+        if i >= len(socs):
+            return volts[-1]
+        s0, s1 = socs[i - 1], socs[i]
+        v0, v1 = volts[i - 1], volts[i]
+        return v0 + (v1 - v0) * (soc - s0) / (s1 - s0)
+
+    def _corners(self) -> tuple[tuple[float, float], ...]:
+        """Footprint corners: front-left, front-right, rear-left, rear-right (world x, y)."""
+        p = self.params
+        c, s = math.cos(self.heading), math.sin(self.heading)
+        half_l, half_w = p.robot_length / 2.0, p.robot_width / 2.0
+        out = []
+        # Body frame: f forward, r to the right; left is -r because y is right of x.
+        for f, r in ((half_l, -half_w), (half_l, half_w), (-half_l, -half_w), (-half_l, half_w)):
+            out.append((self.x + f * c - r * s, self.y + f * s + r * c))
+        return tuple(out)
+
+    def _region_of(self, x: float) -> str:
+        p = self.params
+        if x < p.start_region_end:
+            return "start"
+        if x < p.dig_region_start:
+            return "obstacle"
+        return "dig"
+
+    def _sample_noise(self) -> None:
+        """Draw this step's sensor noise once, so repeated reads agree and runs repeat."""
+        p = self.params
+        self._noise = {
+            "base.battery": self._clipped_gauss(p.v_sensor_noise),
+            "ble.lift_pot": self._clipped_gauss(p.pot_noise),
+            "ble.load_cell": self._clipped_gauss(p.load_cell_noise),
+        }
+
+    def _clipped_gauss(self, sigma: float) -> float:
+        if sigma <= 0.0:
+            return 0.0
+        return max(-3.0 * sigma, min(3.0 * sigma, self._rng.gauss(0.0, sigma)))
