@@ -140,9 +140,10 @@ class Scheduler:
             self.run_once()
 
     def run_for(self, seconds: float) -> None:
-        """Tick for `seconds` of clock time (virtual or real)."""
-        end = self.clock.now() + seconds
-        self.run(lambda: self.clock.now() >= end - 1e-9)
+        """Run the ticks due in the next `seconds` of clock time (virtual or real)."""
+        start = self._next if self._next is not None else self.clock.now()
+        end = start + seconds - 1e-9
+        self.run(lambda: self._next is not None and self._next >= end)
 
     def run_once(self) -> None:
         """Exactly one iteration: wait for the next deadline servicing I/O, then tick."""
@@ -229,8 +230,8 @@ class Scheduler:
         self._next = deadline + (1 + missed) * self.period
         # Tasks that ran past the next deadline: the overrun is this tick's, name its task.
         after = self.clock.now()
-        if after > self._next + self.period:
-            extra = int((after - self._next) // self.period)
+        if after > self._next:
+            extra = int((after - self._next) // self.period) + 1
             self.stats.overruns += 1
             self.stats.skipped += extra
             self.stats.last_overrun_task = self._blame(worst_name, worst_s)

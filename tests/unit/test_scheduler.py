@@ -1,0 +1,108 @@
+"""Scheduler on a virtual clock: rates, dt, skipping without bursts, overrun naming, I/O."""
+
+from __future__ import annotations
+
+import os
+import socket
+
+import pytest
+
+from ramp.clock import VirtualClock
+from ramp.scheduler import Scheduler
+
+
+def test_tasks_run_at_their_divisor_rates_with_dt() -> None:
+    clock = VirtualClock()
+    s = Scheduler(clock, 100)
+    seen: dict[str, list[tuple[float, float]]] = {"fast": [], "slow": [], "ten": []}
+    s.add_task("fast", 100, lambda now, dt: seen["fast"].append((now, dt)))
+    s.add_task("slow", 20, lambda now, dt: seen["slow"].append((now, dt)))
+    s.add_task("ten", 10, lambda now, dt: seen["ten"].append((now, dt)))
+    s.run_for(1.0)
+    assert len(seen["fast"]) == 100
+    assert len(seen["slow"]) == 20
+    assert len(seen["ten"]) == 10
+    assert all(dt == pytest.approx(0.05) for _, dt in seen["slow"])
+    assert seen["slow"][1][0] - seen["slow"][0][0] == pytest.approx(0.05)
+
+
+def test_rate_that_does_not_divide_is_refused() -> None:
+    s = Scheduler(VirtualClock(), 100)
+    with pytest.raises(ValueError, match="does not divide"):
+        s.add_task("odd", 30, lambda now, dt: None)
+    with pytest.raises(ValueError):
+        Scheduler(VirtualClock(), 0)
+
+
+def test_overrun_skips_missed_ticks_and_names_the_task() -> None:
+    clock = VirtualClock()
+    s = Scheduler(clock, 100)
+    runs: list[float] = []
+    state = {"slow": False}
+
+    def hog(now: float, dt: float) -> None:
+        if state["slow"]:
+            state["slow"] = False
+            clock.advance(0.047)  # this task "takes" 47 ms
+
+    s.add_task("quick", 100, lambda now, dt: runs.append(now))
+    s.add_task("hog", 100, hog)
+    s.run_for(0.1)
+    before = len(runs)
+    state["slow"] = True
+    s.run_for(0.2)
+    # 0.2 s at 100 Hz is 20 ticks: the 47 ms task swallowed the deadlines 0.11-0.14, which
+    # are skipped; the loop resumes at 0.15 on the grid, and nothing is replayed in a burst.
+    assert len(runs) - before == 16
+    gaps = [b - a for a, b in zip(runs, runs[1:], strict=False)]
+    assert min(gaps) >= 0.01 - 1e-9
+    assert s.stats.overruns == 1
+    assert s.stats.skipped == 4
+    assert s.stats.last_overrun_task.startswith("hog (47.0 ms)")
+
+
+def test_a_raising_task_does_not_stop_the_loop() -> None:
+    s = Scheduler(VirtualClock(), 100)
+    count = {"n": 0}
+
+    def bad(now: float, dt: float) -> None:
+        raise RuntimeError("boom")
+
+    s.add_task("bad", 100, bad)
+    s.add_task("good", 100, lambda now, dt: count.__setitem__("n", count["n"] + 1))
+    s.run_for(0.1)
+    assert count["n"] == 10
+    assert s.tasks[0].errors == 10
+
+
+def test_lateness_statistics() -> None:
+    clock = VirtualClock()
+    s = Scheduler(clock, 100)
+    s.add_task("t", 100, lambda now, dt: None)
+    s.run_for(1.0)
+    p50, p99, mx = s.stats.percentiles()
+    assert (p50, p99, mx) == (0.0, 0.0, 0.0)
+    assert s.stats.ticks == 100
+
+
+def test_input_is_dispatched_during_the_wait() -> None:
+    s = Scheduler(VirtualClock(), 100)
+    a, b = socket.socketpair()
+    got: list[bytes] = []
+    s.add_reader(a.fileno(), lambda: got.append(a.recv(100)))
+    b.send(b"hello")
+    s.run_once()
+    assert got == [b"hello"]
+    s.remove_reader(a.fileno())
+    a.close()
+    b.close()
+
+
+def test_a_closed_fd_left_registered_is_dropped() -> None:
+    s = Scheduler(VirtualClock(), 100)
+    r, w = os.pipe()
+    s.add_reader(r, lambda: None)
+    os.close(r)
+    os.close(w)
+    s.run_for(0.05)  # must not raise or spin
+    assert r not in s._readers
