@@ -141,3 +141,30 @@ class Harness:
         for c in self.clients:
             c.sock.close()
         self.sup.shutdown()
+
+
+REPO = __import__("pathlib").Path(__file__).resolve().parent.parent
+MARTE_YAML = (REPO / "ramp.yaml").read_text()
+
+
+class SimHarness(Harness):
+    """The MARTE config on the physics model through `ramp.sim.SimBackplane`, as `--sim`."""
+
+    def __init__(self, yaml_text: str = MARTE_YAML, wire_level: bool = True,
+                 seed: int = 0) -> None:
+        from firmware_like.marte import MarteWorld
+        from ramp.sim import SimBackplane
+
+        self.clock = VirtualClock()
+        self.config = config_from(yaml_text.replace("port: 5577", "port: 0"))
+        self.world = MarteWorld(seed=seed)
+        self.backplane = SimBackplane(self.config, self.world, wire_level=wire_level)
+        self.sup = Supervisor(self.config, self.clock, bus_factory=self.backplane.bus_factory,
+                              host="127.0.0.1", port=0)
+        self.backplane.attach(self.sup)
+        self.sup.start()
+        self.clients = []
+
+    def close(self) -> None:
+        super().close()
+        self.backplane.close()
