@@ -1,0 +1,109 @@
+"""`ramp run` as a real process: ready line, SIGTERM, config errors, systemd notify."""
+
+from __future__ import annotations
+
+import os
+import re
+import select
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def start(args: list[str], env: dict[str, str] | None = None) -> tuple[subprocess.Popen[str],
+                                                                         str, int]:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "ramp.cli", "run", *args], cwd=REPO, text=True,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, **(env or {})})
+    assert proc.stdout is not None
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        r, _, _ = select.select([proc.stdout], [], [], 0.5)
+        if r:
+            line = proc.stdout.readline()
+            m = re.match(r"ramp: ready on ([\d.]+):(\d+)", line)
+            if m:
+                return proc, m.group(1), int(m.group(2))
+            if not line and proc.poll() is not None:
+                break
+    proc.kill()
+    raise AssertionError(f"no ready line; stderr: {proc.communicate()[1]}")
+
+
+def ask(sock: socket.socket, text: str) -> str:
+    sock.sendall(text.encode() + b"\n")
+    buf = b""
+    while not buf.endswith(b"\n"):
+        chunk = sock.recv(65536)
+        assert chunk, "server closed"
+        buf += chunk
+    return buf.decode().rstrip("\n")
+
+
+def test_run_sim_serves_and_sigterm_stops_motors_and_exits_0() -> None:
+    proc, host, port = start(["--sim", "--host", "127.0.0.1", "--port", "0"])
+    try:
+        with socket.create_connection((host, port), timeout=5) as s:
+            assert ask(s, "robot:robot.modules=()") == "robot:robot.modules=(base,ble)"
+            assert ask(s, "base:base.drive=(60,0)") == ""
+            assert "base:lf_wheel.vel=(60)" in ask(s, "base:base.get=()")
+            proc.send_signal(signal.SIGTERM)
+            out, err = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0
+    assert "SIGTERM received" in err
+    assert "stopped: every motor commanded to zero" in err
+
+
+def test_config_error_exits_2_and_names_file_line_key(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("buses:\n  m: {driver: sabertooth, port: /dev/null, baud: 1234}\n")
+    proc = subprocess.run([sys.executable, "-m", "ramp.cli", "run", "--config", str(bad)],
+                          cwd=REPO, text=True, capture_output=True, timeout=30)
+    assert proc.returncode == 2
+    assert f"{bad}:2: buses.m.baud: 1234 is not" in proc.stderr
+
+
+@pytest.mark.timeout(60)
+def test_systemd_notify_protocol(tmp_path: Path) -> None:
+    path = tmp_path / "notify.sock"
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(path))
+    sock.settimeout(10)
+    proc, host, port = start(["--sim", "--host", "127.0.0.1", "--port", "0"],
+                             env={"NOTIFY_SOCKET": str(path), "WATCHDOG_USEC": "400000"})
+    try:
+        got: list[str] = []
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and not (
+                any("READY=1" in g for g in got) and sum("WATCHDOG=1" in g for g in got) >= 2
+                and any("STATUS=modules" in g for g in got)):
+            got.append(sock.recv(4096).decode())
+        assert any(g.startswith("READY=1") for g in got)
+        assert sum("WATCHDOG=1" in g for g in got) >= 2
+        status = next(g for g in got if g.startswith("STATUS=modules"))
+        assert "base=ok" in status and "ble=ok" in status
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=10)
+        rest = []
+        sock.settimeout(1)
+        try:
+            while True:
+                rest.append(sock.recv(4096).decode())
+        except TimeoutError:
+            pass
+        assert any(m.startswith("STOPPING=1") for m in rest)
+        assert proc.returncode == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        sock.close()
