@@ -88,6 +88,7 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
     guard = StallGuard(sup, config.stall_limit)
     guard.start()
     notifier.attach(sup)
+    sup.settle()
     h, p = sup.server.address
     print(f"ramp: ready on {h}:{p}", flush=True)
     notifier.ready(f"serving on {h}:{p}")

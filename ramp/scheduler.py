@@ -134,8 +134,10 @@ class Scheduler:
         self._stop = True
 
     def run(self, until: Callable[[], bool] | None = None) -> None:
-        """Tick until `stop()` is called or `until()` is true."""
-        self._stop = False
+        """Tick until `stop()` has been called or `until()` is true.
+
+        A stop is final: a signal that arrives while start-up is still settling must end the
+        main run too."""
         while not self._stop and not (until is not None and until()):
             self.run_once()
 

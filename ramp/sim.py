@@ -38,7 +38,10 @@ class SimBackplane:
         self.devices: list[Any] = []  # emulated devices serviced every tick
         self._tmp = tempfile.TemporaryDirectory(prefix="ramp-sim-")
         self.dir = Path(self._tmp.name)
-        self.services: list[Callable[[float], None]] = []
+        self.services: list[Callable[[float], Any]] = []
+        #: Emulated devices by bus name, for tests and benchmarks (unplug, packet logs).
+        self.sabertooth: dict[str, Any] = {}
+        self.odrive: dict[str, Any] = {}
 
     def bus_factory(self, bc: BusConfig) -> Bus:
         if not bc.sim:
@@ -52,7 +55,73 @@ class SimBackplane:
 
     def _wire_level(self, bc: BusConfig) -> Bus | None:
         """A real driver talking to an emulator, where one exists for this driver."""
+        if bc.driver == "sabertooth":
+            return self._sabertooth(bc)
+        if bc.driver == "can":
+            return self._odrive(bc)
         return None
+
+    def _motor_labels(self, bus: str, key: str) -> dict[Any, str]:
+        """Channel key value (address/motor pair, node id) -> `module.device` on that bus."""
+        out: dict[Any, str] = {}
+        for mname, mc in self.config.modules.items():
+            for dname, dc in mc.devices.items():
+                if dc.bus == bus and dc.kind == "motor":
+                    ident = (dc.channel["address"], dc.channel["motor"]) if key == "address" \
+                        else dc.channel[key]
+                    out[ident] = f"{mname}.{dname}"
+        return out
+
+    def _sabertooth(self, bc: BusConfig) -> Bus:
+        """The Sabertooth firmware emulator behind a pty; the real driver opens its path."""
+        from firmware_like.pty_link import PtyLink
+        from firmware_like.sabertooth import SabertoothEmulator, SabertoothPtyDevice
+        from ramp.hal.sabertooth import SabertoothBus
+
+        labels = self._motor_labels(bc.name, "address")
+        world = self.world
+
+        def on_motor(address: int, motor: int, duty: float) -> None:
+            label = labels.get((address, motor))
+            if label is not None:
+                world.set_motor(label, duty)
+
+        addresses = sorted({a for a, _ in labels}) or [128]
+        link = PtyLink(bc.name, self.dir)
+        emulator = SabertoothEmulator(addresses, on_motor=on_motor, baud=bc.params["baud"],
+                                      paced=True)
+        device = SabertoothPtyDevice(link, emulator)
+        self.devices.append(link)
+        self.services.append(device.service)
+        self.sabertooth[bc.name] = device
+        params = {**bc.params, "port": link.path}
+        log.info("bus %s: Sabertooth emulator (addresses %s) on %s", bc.name,
+                 ",".join(map(str, addresses)), link.path)
+        return SabertoothBus(bc.name, params)
+
+    def _odrive(self, bc: BusConfig) -> Bus:
+        """ODrive emulators on python-can's virtual bus; the real driver talks CAN frames."""
+        from firmware_like.odrive import ODriveEmulator
+        from ramp.hal.odrive import ODriveBus
+
+        labels = self._motor_labels(bc.name, "node_id")
+        max_vel = float(bc.params["max_vel"])
+        world = self.world
+
+        def on_velocity(node: int, turns_per_s: float) -> None:
+            label = labels.get(node)
+            if label is not None:
+                world.set_motor(label, max(-1.0, min(1.0, turns_per_s / max_vel)))
+
+        channel = f"ramp-sim-{id(self):x}-{bc.name}"
+        emulator = ODriveEmulator(channel, sorted(labels), on_velocity=on_velocity)
+        self.devices.append(emulator)
+        self.services.append(emulator.tick)
+        self.odrive[bc.name] = emulator
+        params = {**bc.params, "interface": "virtual", "channel": channel}
+        log.info("bus %s: ODrive emulators (nodes %s) on virtual CAN", bc.name,
+                 ",".join(map(str, sorted(labels))))
+        return ODriveBus(bc.name, params)
 
     def attach(self, sup: Supervisor) -> None:
         """Step the world (and service emulators) first in every tick."""

@@ -96,6 +96,16 @@ class Supervisor:
         self.server.start()
         self.running = True
 
+    def settle(self, limit: float = 2.0) -> None:
+        """Run the loop (serving) until every opened bus reports ready, at most `limit` s.
+
+        Boards such as ODrives and Phidgets open at once but answer a moment later; the ready
+        line waits for them so a client connecting right after sees its modules attached.
+        """
+        end = self.clock.now() + limit
+        self.scheduler.run(lambda: self.clock.now() >= end or all(
+            b.ready() for b in self.buses.values() if b.is_open))
+
     def shutdown(self) -> None:
         """Stop every motor (zeros on the wire), close devices and the server. Idempotent."""
         if not self.running and not any(b.is_open for b in self.buses.values()):

@@ -163,6 +163,7 @@ class SimHarness(Harness):
                               host="127.0.0.1", port=0)
         self.backplane.attach(self.sup)
         self.sup.start()
+        self.sup.settle()
         self.clients = []
 
     def close(self) -> None:

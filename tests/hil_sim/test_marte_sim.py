@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import pytest
 
@@ -175,3 +176,31 @@ def test_describe_is_built_from_the_tables(h: SimHarness) -> None:
     assert "base:battery.property=(volt,float,V)" in base
     ble = c.ask("ble:ble.describe=()")
     assert "ble:lift.function=(pos,float 0..1)" in ble
+
+
+ODRIVE_YAML = (Path(__file__).resolve().parents[2] / "examples" / "marte-odrive.yaml").read_text()
+
+
+@pytest.fixture(params=["sabertooth", "odrive"])
+def any_drive(request: pytest.FixtureRequest) -> SimHarness:
+    """The same drive tests on the Sabertooth wiring and on the ODrive (CAN) wiring."""
+    from tests.harness import MARTE_YAML
+
+    harness = SimHarness(MARTE_YAML if request.param == "sabertooth" else ODRIVE_YAML)
+    yield harness
+    harness.close()
+
+
+def test_drive_tests_pass_on_either_motor_driver(any_drive: SimHarness) -> None:
+    h = any_drive
+    h.world.place(2.0, 1.94, 0.0)
+    c = h.connect()
+    drive(h, c, "base:base.drive=(100,0)", 2.0)
+    assert h.world.x > 2.3 and abs(h.world.heading_deg) < 3
+    drive(h, c, "base:base.drive=(100,90)", 2.0)
+    assert h.world.heading_deg > 20
+    drive(h, c, "base:base.drive=(100,180)", 1.0)
+    assert c.ask("base:base.stop=()") == ""
+    h.advance(0.5)
+    assert all(abs(h.world.wheel_speed(f"base.{w}")) < 0.02
+               for w in ("lf_wheel", "lb_wheel", "rf_wheel", "rb_wheel"))
