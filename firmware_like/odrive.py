@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 import struct
-from collections.abc import Callable, Hashable, Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import can
@@ -75,7 +75,7 @@ class ODriveEmulator:
 
     def __init__(
         self,
-        channel: Hashable,
+        channel: str,
         node_ids: Iterable[int],
         on_velocity: Callable[[int, float], None] | None = None,
         *,

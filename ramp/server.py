@@ -9,6 +9,7 @@ turn.
 from __future__ import annotations
 
 import errno
+import functools
 import logging
 import socket
 from collections.abc import Callable
@@ -111,7 +112,7 @@ class McpServer:
             conn = Connection(sock, peer, self.max_line)
             self.clients[conn.fd] = conn
             self.accepted += 1
-            self.scheduler.add_reader(conn.fd, lambda c=conn: self._readable(c))
+            self.scheduler.add_reader(conn.fd, functools.partial(self._readable, conn))
             log.info("client %s connected (%d of %d)", peer, len(self.clients),
                      self.max_clients)
 
@@ -150,7 +151,7 @@ class McpServer:
             self._drop(conn, f"not reading its responses ({len(conn.out)} bytes unsent)")
             return
         if conn.out:
-            self.scheduler.add_writer(conn.fd, lambda c=conn: self._flush(c))
+            self.scheduler.add_writer(conn.fd, functools.partial(self._flush, conn))
         else:
             self.scheduler.remove_writer(conn.fd)
 

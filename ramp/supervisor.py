@@ -178,10 +178,10 @@ class Supervisor:
     def _retry_buses(self, now: float, dt: float) -> None:
         reopened = False
         for name, bus in self.buses.items():
-            if not bus.is_open and now >= self.bus_health[name].next_retry:
-                if self._try_open(name, bus, now):
-                    log.info("bus %s is back", name)
-                    reopened = True
+            if (not bus.is_open and now >= self.bus_health[name].next_retry
+                    and self._try_open(name, bus, now)):
+                log.info("bus %s is back", name)
+                reopened = True
         if reopened:
             self._update_slots(now)
 

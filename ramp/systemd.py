@@ -83,10 +83,10 @@ class SystemdNotifier:
             return
         stats = sup.scheduler.stats
         recent_late = stats.late_us[-1] / 1e6 if stats.late_us else 0.0
-        if self.watchdog_s and now - self._last_pet >= self.watchdog_s / 2:
-            if recent_late < self.late_limit:
-                self.send("WATCHDOG=1")
-                self._last_pet = now
+        if (self.watchdog_s and now - self._last_pet >= self.watchdog_s / 2
+                and recent_late < self.late_limit):
+            self.send("WATCHDOG=1")
+            self._last_pet = now
         if now - self._last_status >= STATUS_PERIOD:
             self.send(f"STATUS={summary(sup)}")
             self._last_status = now

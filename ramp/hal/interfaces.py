@@ -182,7 +182,7 @@ class Bus(ABC):
         """A file descriptor the scheduler can wait on for input, or None."""
         return None
 
-    def on_readable(self, now: float) -> None:
+    def on_readable(self, now: float) -> None:  # noqa: B027 - optional hook, default no-op
         """Called by the scheduler when `fileno()` has input."""
 
     @abstractmethod

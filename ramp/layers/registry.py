@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import importlib
-
-from ramp.layers.module import Module
+from typing import Any
 
 MODULE_TYPES: dict[str, tuple[str, str]] = {
     "base": ("ramp.layers.base", "BaseModule"),
@@ -13,12 +12,13 @@ MODULE_TYPES: dict[str, tuple[str, str]] = {
 }
 
 
-def module_class(type_name: str) -> type[Module]:
+def module_class(type_name: str) -> Any:
+    """The module class registered as `type_name` (a `ModuleFactory` with class attributes
+    `devices` and `settings`); ValueError lists the valid names."""
     try:
         mod, cls = MODULE_TYPES[type_name]
     except KeyError:
         raise ValueError(
             f"unknown module type {type_name!r} (expected one of: "
             f"{', '.join(sorted(MODULE_TYPES))})") from None
-    found: type[Module] = getattr(importlib.import_module(mod), cls)
-    return found
+    return getattr(importlib.import_module(mod), cls)

@@ -91,3 +91,21 @@ def test_ramp_check_command(tmp_path: Path, capsys: object) -> None:
     cfg, errors = check_config(bad)
     assert len(errors) == 2
     assert main(["check", str(tmp_path / "missing.yaml")]) == 1
+
+
+def test_checks_spanning_several_keys_are_reported_with_their_line() -> None:
+    from tests.harness import MARTE_YAML
+
+    text = MARTE_YAML.replace("volts_at_0: 0.6, volts_at_1: 4.4", "volts_at_0: 2.0, volts_at_1: 2.0")
+    errs = errors_of(text)
+    line = next(i for i, t in enumerate(text.splitlines(), 1) if "lift_pot:" in t)
+    assert len(errs) == 1 and errs[0].startswith(f"ramp.yaml:{line}: modules.ble.lift_pot")
+
+
+def test_marte_config_with_a_bad_sabertooth_address() -> None:
+    from tests.harness import MARTE_YAML
+
+    text = MARTE_YAML.replace("address: 128, motor: 1}", "address: 140, motor: 1}")
+    line = next(i for i, t in enumerate(text.splitlines(), 1) if "address: 140" in t)
+    assert errors_of(text) == [f"ramp.yaml:{line}: modules.base.lf_wheel.address: 140 is not a "
+                               "Sabertooth address (128-135)"]
