@@ -96,7 +96,8 @@ def test_ramp_check_command(tmp_path: Path, capsys: object) -> None:
 def test_checks_spanning_several_keys_are_reported_with_their_line() -> None:
     from tests.harness import MARTE_YAML
 
-    text = MARTE_YAML.replace("volts_at_0: 0.6, volts_at_1: 4.4", "volts_at_0: 2.0, volts_at_1: 2.0")
+    text = MARTE_YAML.replace("volts_at_0: 0.6, volts_at_1: 4.4",
+                              "volts_at_0: 2.0, volts_at_1: 2.0")
     errs = errors_of(text)
     line = next(i for i, t in enumerate(text.splitlines(), 1) if "lift_pot:" in t)
     assert len(errs) == 1 and errs[0].startswith(f"ramp.yaml:{line}: modules.ble.lift_pot")
