@@ -1,0 +1,172 @@
+"""A small blocking MCP client for the shell, benchmarks, autonomy and tests.
+
+It blocks by design: it runs in a client process, never in the supervisor's tick. Each
+`send` writes one message and the server answers every message with exactly one line, so
+`request` pairs them without any bookkeeping as long as every `send` is followed by a `recv`.
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+from collections import deque
+from collections.abc import Iterable
+from types import TracebackType
+
+from ramp.errors import ProtocolError
+from ramp.mcp.messages import Request, Response
+from ramp.mcp.protocol import LineSplitter, TooLong, format_requests, parse_response_line
+
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_PORT = 5577
+# A describe of a large robot runs to a few kilobytes; anything near this is not MCP.
+MAX_RESPONSE_LINE = 1 << 20
+
+
+def parse_address(text: str | None, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
+    """`host:port`, `port`, `host`, `[v6]:port`, a bare IPv6 address or None -> (host, port).
+
+    Raises ValueError with a message fit for a command line.
+    """
+    if text is None or not text.strip():
+        return DEFAULT_HOST, default_port
+    text = text.strip()
+    host, port_text = text, ""
+    if text.startswith("["):
+        close = text.find("]")
+        if close < 0:
+            raise ValueError(f"bad address {text!r}: missing ']'")
+        host, rest = text[1:close], text[close + 1:]
+        if rest and not rest.startswith(":"):
+            raise ValueError(f"bad address {text!r}: expected ':' after ']'")
+        port_text = rest[1:]
+    elif text.isdigit():
+        host, port_text = DEFAULT_HOST, text
+    elif text.count(":") == 1:
+        host, port_text = text.split(":")
+    # More than one colon without brackets: a bare IPv6 address, on the default port.
+    if not host:
+        if text.startswith("["):
+            raise ValueError(f"bad address {text!r}: empty host in brackets")
+        host = DEFAULT_HOST
+    if not port_text:
+        return host, default_port
+    if not port_text.isdigit() or not 1 <= int(port_text) <= 65535:
+        raise ValueError(f"bad address {text!r}: port must be 1-65535")
+    return host, int(port_text)
+
+
+def errors(responses: Iterable[Response]) -> list[Response]:
+    """The error responses among `responses`."""
+    return [r for r in responses if r.prop == "error"]
+
+
+class McpClient:
+    """One TCP connection to a RAMP supervisor."""
+
+    errors = staticmethod(errors)
+
+    def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
+                 timeout: float = 2.0) -> None:
+        self.host, self.port, self.timeout = host, port, timeout
+        self._lines: deque[bytes] = deque()
+        self._splitter = LineSplitter(MAX_RESPONSE_LINE)
+        self._sock: socket.socket | None = socket.create_connection((host, port), timeout)
+        # Requests are small and latency matters more than packet count (one request, one
+        # answer): without this Nagle holds a message back behind an unacknowledged one.
+        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
+    def __enter__(self) -> McpClient:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        state = "open" if self._sock is not None else "closed"
+        return f"McpClient({self.host}:{self.port}, {state})"
+
+    @property
+    def closed(self) -> bool:
+        return self._sock is None
+
+    def fileno(self) -> int:
+        """The socket's descriptor, for select() in a watch loop."""
+        return self._connected().fileno()
+
+    def has_line(self) -> bool:
+        """A complete response line is already buffered (recv will not block)."""
+        return bool(self._lines)
+
+    def send(self, message: str | bytes | Request | Iterable[Request] = "") -> None:
+        """Write one message; the `\\n` is added here, so the text must not contain one."""
+        sock = self._connected()
+        if isinstance(message, Request):
+            data = format_requests([message])
+        elif isinstance(message, str | bytes):
+            raw = message.encode("ascii") if isinstance(message, str) else message
+            if raw.endswith(b"\n"):
+                raw = raw[:-1]
+            if b"\n" in raw:
+                raise ValueError("one message per send: the text contains a line break")
+            data = raw + b"\n"
+        else:
+            data = format_requests(message)
+        try:
+            sock.sendall(data)
+        except OSError as exc:
+            self.close()
+            raise ConnectionError(f"sending to {self.host}:{self.port} failed: {exc}") from exc
+
+    def recv(self) -> list[Response]:
+        """The next response line, parsed; TimeoutError after `timeout` s without one."""
+        return parse_response_line(self.recv_line())
+
+    def recv_line(self) -> bytes:
+        """The next raw response line (no `\\n`), for callers that print it as it came."""
+        sock = self._connected()
+        deadline = time.monotonic() + self.timeout
+        while not self._lines:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise TimeoutError(f"no response from {self.host}:{self.port} "
+                                   f"within {self.timeout} s")
+            sock.settimeout(remaining)
+            try:
+                data = sock.recv(65536)
+            except TimeoutError:
+                raise TimeoutError(f"no response from {self.host}:{self.port} "
+                                   f"within {self.timeout} s") from None
+            except OSError as exc:
+                self.close()
+                raise ConnectionError(f"connection to {self.host}:{self.port} failed: "
+                                      f"{exc}") from exc
+            if not data:
+                self.close()
+                raise ConnectionError(f"{self.host}:{self.port} closed the connection")
+            for item in self._splitter.feed(data):
+                if isinstance(item, TooLong):
+                    raise ProtocolError(f"response line longer than {MAX_RESPONSE_LINE} bytes")
+                self._lines.append(item)
+        return self._lines.popleft()
+
+    def request(self, message: str | bytes | Request | Iterable[Request]) -> list[Response]:
+        """Send one message and return its responses."""
+        self.send(message)
+        return self.recv()
+
+    def heartbeat(self) -> list[Response]:
+        """Send a bare `\\n` (keeps the watchdog fed when this client drives); [] expected."""
+        return self.request(b"")
+
+    def close(self) -> None:
+        """Close the connection; safe to call more than once."""
+        sock, self._sock = self._sock, None
+        if sock is not None:
+            sock.close()
+
+    def _connected(self) -> socket.socket:
+        if self._sock is None:
+            raise ConnectionError(f"connection to {self.host}:{self.port} is closed")
+        return self._sock
