@@ -11,8 +11,9 @@ import re
 from abc import ABC, abstractmethod
 from typing import Any
 
-_INT = re.compile(r"[+-]?\d+\Z")
-_FLOAT = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?\Z")
+# ASCII digits only ([0-9], not \d), and forms that cannot backtrack on long digit runs.
+_INT = re.compile(r"[+-]?[0-9]+\Z")
+_FLOAT = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?\Z")
 _NAME = re.compile(r"[A-Za-z0-9_-]{1,32}\Z")
 
 
@@ -37,7 +38,7 @@ class IntParam(Param):
         self.lo, self.hi = lo, hi
 
     def convert(self, token: str) -> int:
-        if not _INT.match(token) or len(token) > 20:
+        if len(token) > 20 or not _INT.match(token):
             raise BadParam(token)
         v = int(token)
         if not self.lo <= v <= self.hi:
@@ -56,7 +57,7 @@ class FloatParam(Param):
         self.lo, self.hi, self.lo_open = lo, hi, lo_open
 
     def convert(self, token: str) -> float:
-        if not _FLOAT.match(token) or len(token) > 64:
+        if len(token) > 64 or not _FLOAT.match(token):
             raise BadParam(token)
         v = float(token)
         if not math.isfinite(v):
@@ -94,7 +95,7 @@ class NameParam(Param):
         self.reserved = reserved
 
     def convert(self, token: str) -> str:
-        if not _NAME.match(token) or token in self.reserved:
+        if not _NAME.match(token) or token.lower() in self.reserved:
             raise BadParam(token)
         return token
 
@@ -117,6 +118,8 @@ def signature(function: str, params: tuple[Param, ...]) -> str:
     """`vel takes one int in -100..100` style text for bad_params details."""
     if not params:
         return f"{function} takes no parameters"
+    if len(params) == 1:
+        return f"{function} takes one {_phrase(params[0])}"
     words = ["one", "two", "three", "four"]
     n = words[len(params) - 1] if len(params) <= 4 else str(len(params))
     kinds = " and ".join(_phrase(p) for p in params)

@@ -62,11 +62,11 @@ def test_bad_request_among_good_ones_changes_nothing_else(h: Harness) -> None:
     resp = c.ask("demo:motor.vel=(20)demo:motor.vel=(300)demo:lamp.on=(1)nope:x.y=()"
                  "demo:motor.spin=()demo:wheel.vel=(1)demo:motor.vel=(nan)")
     assert resp == (
-        "demo:motor.error=(bad_params,vel takes one parameter: int in -100..100)"
+        "demo:motor.error=(bad_params,vel takes one int in -100..100)"
         "nope:x.error=(unknown_module,no module nope; known: robot demo arm)"
         "demo:motor.error=(unknown_function,motor has no function spin)"
         "demo:wheel.error=(unknown_device,demo has no device wheel)"
-        "demo:motor.error=(bad_params,vel takes one parameter: int in -100..100)")
+        "demo:motor.error=(bad_params,vel takes one int in -100..100)")
     assert h.world.motors["demo.motor"] == pytest.approx(0.2)
     assert h.world.outputs["demo.lamp"] is True
 

@@ -159,7 +159,7 @@ def test_bad_params_detail_wording() -> None:
     m, _ = build()
     with pytest.raises(RequestError) as e:
         m.lookup(Request("base", "lf_wheel", "vel", ("101",)))
-    assert e.value.detail == "vel takes one parameter: int in -100..100"
+    assert e.value.detail == "vel takes one int in -100..100"
 
 
 def test_unknown_device_and_function() -> None:
