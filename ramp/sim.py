@@ -42,6 +42,7 @@ class SimBackplane:
         #: Emulated devices by bus name, for tests and benchmarks (unplug, packet logs).
         self.sabertooth: dict[str, Any] = {}
         self.odrive: dict[str, Any] = {}
+        self._watched: dict[str, int] = {}
 
     def bus_factory(self, bc: BusConfig) -> Bus:
         if not bc.sim:
@@ -124,13 +125,35 @@ class SimBackplane:
         return ODriveBus(bc.name, params)
 
     def attach(self, sup: Supervisor) -> None:
-        """Step the world (and service emulators) first in every tick."""
+        """Step the world (and service emulators) first in every tick; emulators behind a pty
+        also read in the scheduler's I/O wait, so bytes are stamped when they arrive."""
+        self._scheduler = sup.scheduler
+        self._clock = sup.clock
         sup.scheduler.add_task("sim.world", sup.scheduler.rate_hz, self.tick)
 
     def tick(self, now: float, dt: float) -> None:
+        self._watch_ptys()
         for service in self.services:
             service(now)
         self.world.step(dt)
+
+    def _watch_ptys(self) -> None:
+        """(Re)register each pty master with the loop: a replug opens a new one."""
+        sched = getattr(self, "_scheduler", None)
+        if sched is None:
+            return
+        for name, device in self.sabertooth.items():
+            fd = device.link.master_fd
+            old = self._watched.get(name)
+            if old == fd:
+                continue
+            if old is not None:
+                sched.remove_reader(old)
+            if fd >= 0:
+                sched.add_reader(fd, lambda d=device: d.service(self._clock.now()))
+                self._watched[name] = fd
+            else:
+                self._watched.pop(name, None)
 
     def close(self) -> None:
         for dev in self.devices:

@@ -11,8 +11,11 @@ back. The wire is slow (9600 baud carries 240 packets/s), so this driver is most
   second carries at most 32 + (baud/10 - 32) = baud/10 bytes, bursts stay <= 32 bytes, and a
   sustained stream of changes keeps the wire > 90 % busy at 9600 and 19200 baud. The bucket
   refills only in `tick`, so at 100 Hz at most 32 bytes go per tick (3200 B/s): 83 % of
-  38400 baud, 28 % of 115200. Staying under the wire rate also keeps the OS transmit buffer
-  empty, so "newest wins" holds down to the wire.
+  38400 baud, 28 % of 115200.
+- **Shallow queue.** The driver models the wire: it knows when the bytes it already wrote will
+  have left the UART, and writes more only while less than one tick of wire time is queued.
+  A 32-byte burst would otherwise sit 33 ms in the OS buffer at 9600 baud, and a newer command
+  would wait behind stale ones; this way "newest wins" holds down to the wire.
 - **Refresh.** Every channel is re-sent at least twice per controller timeout, so the
   controller's own timeout (command 14, programmed at open) fires only when the supervisor
   is gone or the cable is cut. A refresh normally waits behind changes; one that is late
@@ -110,6 +113,9 @@ class SabertoothBus(Bus):
         self.exclusive: bool = cfg["exclusive"]
         #: Bytes per second the pacer may use on top of one burst (see module docstring).
         self.rate = self.baud / 10 - BURST_BYTES
+        #: Wire time of one byte (8N1: 10 bits), and how much may wait in the OS buffer.
+        self._byte_time = 10.0 / self.baud
+        self._queue_limit = 0.01
         slack = min(REFRESH_SLACK_S, self.timeout_s / 4)
         #: A channel is re-sent once its last packet is this old ...
         self.refresh_period = self.timeout_s / 2 - slack
@@ -134,6 +140,7 @@ class SabertoothBus(Bus):
         self._tail = b""
         self._tokens = float(BURST_BYTES)
         self._refilled_at = self._now
+        self._wire_free_at = self._now  # when the bytes written so far will have left
         self._failure: DeviceError | None = None
 
     # -- channels -----------------------------------------------------------------------------
@@ -204,6 +211,7 @@ class SabertoothBus(Bus):
             self._write_blocking(bytes(start))
             if self._fd is not None and not is_url:
                 ser.flush()  # tcdrain: on a real UART, wait until the bytes have left
+            self._wire_free_at = self._now  # drained (or a URL handler): nothing queued
         except DeviceError:
             self._close()
             raise
@@ -215,6 +223,8 @@ class SabertoothBus(Bus):
         if self._failure is not None:
             raise self._failure
         self._now = now
+        if dt > 0:
+            self._queue_limit = max(self._byte_time * codec.PACKET_LEN, dt)
         elapsed = max(0.0, now - self._refilled_at)
         self._tokens = min(float(BURST_BYTES), self._tokens + self.rate * elapsed)
         self._refilled_at = now
@@ -305,6 +315,8 @@ class SabertoothBus(Bus):
                     if self._pending or self._something_due():
                         self.stats["budget_waits"] += 1
                     return
+                if self._wire_free_at - self._now >= self._queue_limit:
+                    return  # enough is queued; what comes next may still be superseded
                 pkt = self._next_packet()
                 if pkt is None:
                     return
@@ -352,6 +364,7 @@ class SabertoothBus(Bus):
         except (serial.SerialException, OSError, ValueError) as exc:
             raise DeviceError(self.name, f"write to {self.port} failed: {exc}") from exc
         self.stats["bytes_sent"] += n
+        self._wire_free_at = max(self._now, self._wire_free_at) + n * self._byte_time
         return int(n)
 
     def _write_blocking(self, data: bytes) -> None:
