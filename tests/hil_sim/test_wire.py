@@ -93,3 +93,24 @@ def test_watchdog_trip_puts_zeros_on_the_wire(h: SimHarness) -> None:
     h.advance(1.05)  # silent past the 1 s watchdog
     assert all(emu.duty(a, m) == 0.0 for a in (128, 129) for m in (1, 2))
     assert not any(emu.timed_out(a) for a in (128, 129))  # the supervisor stopped them
+
+
+def test_moving_a_wheel_to_another_channel_is_a_yaml_edit() -> None:
+    from tests.harness import MARTE_YAML
+
+    swapped = (MARTE_YAML
+               .replace("lf_wheel: {bus: base_motors, address: 128, motor: 1}",
+                        "lf_wheel: {bus: base_motors, address: 128, motor: 2}")
+               .replace("lb_wheel: {bus: base_motors, address: 128, motor: 2}",
+                        "lb_wheel: {bus: base_motors, address: 128, motor: 1}"))
+    assert swapped.count("motor: 2}") == MARTE_YAML.count("motor: 2}")
+    h = SimHarness(swapped)
+    try:
+        c = h.connect()
+        emu = base_emulator(h)
+        assert c.ask("base:lf_wheel.vel=(50)") == ""
+        h.advance(0.05)
+        assert emu.duty(128, 2) == pytest.approx(64 / 127, abs=1e-6)  # the new channel
+        assert emu.duty(128, 1) == 0.0
+    finally:
+        h.close()
