@@ -60,6 +60,7 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
     from ramp.systemd import SystemdNotifier
 
     clock = MonotonicClock()
+    backplane = None
     if sim:
         from ramp.sim import SimBackplane  # the one place ramp/ reaches firmware_like/
 
@@ -82,6 +83,8 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
     except OSError as exc:
         log.error("cannot serve on %s:%s: %s", sup.server.host, sup.server.port, exc.strerror)
         sup.shutdown()
+        if backplane is not None:
+            backplane.close()
         return 1
     from ramp.stall_guard import StallGuard
 
@@ -98,6 +101,8 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
         notifier.stopping()
         guard.stop()
         sup.shutdown()
+        if backplane is not None:
+            backplane.close()
         log.info("stopped: every motor commanded to zero")
     return 0
 
