@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import signal
 import sys
 from collections.abc import Sequence
@@ -16,13 +17,28 @@ from ramp.errors import ConfigError
 log = logging.getLogger("ramp")
 
 
+class JournalFormatter(logging.Formatter):
+    """Prefixes each line with its syslog priority (`<4>`), which journald reads, so
+    `journalctl -p warning` finds warnings and errors."""
+
+    PRIORITY = {logging.DEBUG: 7, logging.INFO: 6, logging.WARNING: 4, logging.ERROR: 3,
+                logging.CRITICAL: 2}
+
+    def format(self, record: logging.LogRecord) -> str:
+        return f"<{self.PRIORITY.get(record.levelno, 6)}>{super().format(record)}"
+
+
 def setup_logging(level: str) -> None:
-    """One line per event; timestamps only on a terminal (journald adds its own)."""
+    """One line per event, plain text; timestamps only on a terminal (journald adds its
+    own), syslog priorities when stderr is connected to the journal."""
     fmt = "%(levelname)s %(name)s: %(message)s"
     if sys.stderr.isatty():
         fmt = "%(asctime)s " + fmt
-    logging.basicConfig(level=getattr(logging, level.upper(), logging.INFO), format=fmt,
-                        stream=sys.stderr, force=True)
+    handler = logging.StreamHandler(sys.stderr)
+    journal = bool(os.environ.get("JOURNAL_STREAM")) and not sys.stderr.isatty()
+    handler.setFormatter(JournalFormatter(fmt) if journal else logging.Formatter(fmt))
+    logging.basicConfig(level=getattr(logging, level.upper(), logging.INFO),
+                        handlers=[handler], force=True)
 
 
 def _print_errors(errors: list[ConfigError]) -> None:

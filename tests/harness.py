@@ -7,8 +7,13 @@ second costs milliseconds.
 
 from __future__ import annotations
 
+import os
+import re
 import select
 import socket
+import subprocess
+import sys
+import time
 from typing import Any
 
 from ramp.clock import VirtualClock
@@ -169,3 +174,25 @@ class SimHarness(Harness):
     def close(self) -> None:
         super().close()
         self.backplane.close()
+
+
+def start_ramp(args: list[str], env: dict[str, str] | None = None,
+               stderr: int = subprocess.PIPE) -> tuple[subprocess.Popen[str], str, int]:
+    """`ramp run ARGS` as a process, once it printed its ready line: (process, host, port).
+    The process is killed if it never gets ready."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "ramp.cli", "run", *args], cwd=REPO, text=True,
+        stdout=subprocess.PIPE, stderr=stderr, env={**os.environ, **(env or {})})
+    assert proc.stdout is not None
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        r, _, _ = select.select([proc.stdout], [], [], 0.5)
+        if r:
+            line = proc.stdout.readline()
+            m = re.match(r"ramp: ready on ([\d.]+):(\d+)", line)
+            if m:
+                return proc, m.group(1), int(m.group(2))
+            if not line and proc.poll() is not None:
+                break
+    proc.kill()
+    raise AssertionError(f"no ready line; stderr: {proc.communicate()[1]}")

@@ -75,11 +75,22 @@ class RobotRequests(Module):
     def _get(self) -> list[Response]:
         return self.layer.health_rows()
 
+    #: The rows of `robot.get`: (device, property, type, unit).
+    HEALTH_ROWS = (("robot", "uptime", "float", "s"), ("tick", "rate", "float", "Hz"),
+                   ("tick", "late", "int", "us"), ("tick", "overruns", "int", ""),
+                   ("watchdog", "timeout", "float", "s"), ("watchdog", "state", "name", ""),
+                   ("control", "owner", "name", ""), ("clients", "count", "int", ""))
+
     def describe(self) -> list[Response]:
         out = [Response("robot", "robot", "module", (name,)) for name in self.layer.slots]
         for fn in self.functions.values():
             out.append(Response("robot", fn.device, "function",
                                 (fn.name, *(p.describe() for p in fn.params))))
+        for device, prop, kind, unit in self.HEALTH_ROWS:
+            out.append(Response("robot", device, "property",
+                                (prop, kind, unit) if unit else (prop, kind)))
+        out.extend(Response("robot", name, "property", ("state", "name"))
+                   for name in self.layer.slots)
         return out
 
     def stop(self) -> None:

@@ -173,6 +173,9 @@ def test_describe_lists_functions_and_properties(h: Harness) -> None:
     assert "robot:robot.module=(demo)robot:robot.module=(arm)" in robot
     assert "robot:watchdog.function=(timeout,float >0..60)" in robot
     assert "robot:control.function=(acquire,name)" in robot
+    assert "robot:robot.property=(uptime,float,s)" in robot
+    assert "robot:tick.property=(late,int,us)" in robot
+    assert "robot:demo.property=(state,name)" in robot
     demo = c.ask("demo:demo.describe=()")
     assert "demo:motor.function=(vel,int -100..100)" in demo
     assert "demo:motor.property=(vel,int,%)" in demo

@@ -87,3 +87,21 @@ def test_logs_have_no_colour_codes_off_a_terminal(capfd: pytest.CaptureFixture[s
         root.handlers[:] = saved
         root.setLevel(level)
     assert err == "WARNING ramp.test: one line\n"
+
+
+def test_journald_gets_syslog_priorities(capfd: pytest.CaptureFixture[str],
+                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    from ramp.cli import setup_logging
+
+    monkeypatch.setenv("JOURNAL_STREAM", "8:12345")
+    root = logging.getLogger()
+    saved, level = root.handlers[:], root.level
+    try:
+        setup_logging("info")
+        logging.getLogger("ramp.test").warning("low battery")
+        logging.getLogger("ramp.test").error("bus gone")
+        err = capfd.readouterr().err
+    finally:
+        root.handlers[:] = saved
+        root.setLevel(level)
+    assert err == "<4>WARNING ramp.test: low battery\n<3>ERROR ramp.test: bus gone\n"

@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import os
-import re
-import select
 import signal
 import socket
 import subprocess
@@ -14,27 +11,8 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
-
-
-def start(args: list[str], env: dict[str, str] | None = None) -> tuple[subprocess.Popen[str],
-                                                                         str, int]:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "ramp.cli", "run", *args], cwd=REPO, text=True,
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, **(env or {})})
-    assert proc.stdout is not None
-    deadline = time.monotonic() + 30
-    while time.monotonic() < deadline:
-        r, _, _ = select.select([proc.stdout], [], [], 0.5)
-        if r:
-            line = proc.stdout.readline()
-            m = re.match(r"ramp: ready on ([\d.]+):(\d+)", line)
-            if m:
-                return proc, m.group(1), int(m.group(2))
-            if not line and proc.poll() is not None:
-                break
-    proc.kill()
-    raise AssertionError(f"no ready line; stderr: {proc.communicate()[1]}")
+from tests.harness import REPO
+from tests.harness import start_ramp as start
 
 
 def ask(sock: socket.socket, text: str) -> str:
