@@ -82,7 +82,7 @@ def test_sigkill_leaves_the_motors_stopped_by_the_controller_timeout(tmp_path: P
     cfg = tmp_path / "bench.yaml"
     cfg.write_text(text)
     proc, host, port = start(["--sim", "--config", str(cfg), "--host", "127.0.0.1",
-                              "--port", "0"])
+                              "--port", "0"], env={"TMPDIR": str(tmp_path)})
     try:
         with socket.create_connection((host, port), timeout=5) as s:
             assert ask(s, "base:base.drive=(70,0)") == ""

@@ -41,7 +41,11 @@ class Server:
 
     def close(self) -> None:
         if self.proc.poll() is None:
-            self.proc.kill()
+            self.proc.terminate()  # SIGTERM: the supervisor cleans its sim ptys up
+            try:
+                self.proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
         self.proc.wait(timeout=10)
         if self.proc.stdout is not None:
             self.proc.stdout.close()

@@ -1,0 +1,12 @@
+"""RAMP benchmark suite: `python -m bench [--quick] [--only NAME[,NAME]] [--out FILE]`.
+
+Every figure is measured on real processes and real sockets on this machine, beside a
+baseline measured in the same run (a bare Python loop or server doing the minimum), so a
+slow machine or a busy neighbour shows up in both and the ratio stays meaningful. Nothing
+here asserts a threshold: the suite reports, people judge.
+"""
+
+from __future__ import annotations
+
+#: Benchmark names, in the order they run.
+SECTIONS = ("tick", "round_trip", "command_to_wire", "watchdog_to_wire", "startup")

@@ -1,0 +1,298 @@
+"""Processes the benchmarks start: `python -m bench.child NAME ...`.
+
+- `supervisor`: exactly `ramp run --sim` (it calls `ramp.cli.main`), plus two observation
+  hooks installed from outside, so no file in ramp/ changes: the scheduler's `TickStats` is
+  replaced by a subclass that also keeps every lateness sample with its time, and the
+  Supervisor by a subclass that copies each driver's `stats` just before shutdown. Both are
+  written to `--dump` as JSON when the process exits (after SIGTERM).
+- `select-loop`: the tick baseline, a bare absolute-deadline loop waiting in `select.select`,
+  run beside the supervisor until told to stop.
+- `echo`: the round-trip baseline, a minimal `selectors` server answering every line with a
+  fixed response of the supervisor's size.
+- `relay`: the wire baseline, a minimal TCP-line to Sabertooth-packet relay with a watchdog,
+  writing through pyserial to the same pty the supervisor's driver would use.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import re
+import select
+import selectors
+import signal
+import socket
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+
+# -- supervisor ---------------------------------------------------------------------------------
+def supervisor(args: argparse.Namespace) -> int:
+    import ramp.cli
+    import ramp.scheduler
+    import ramp.supervisor
+
+    samples: list[tuple[float, float, int]] = []
+    bus_stats: dict[str, dict[str, int]] = {}
+
+    class RecordingTickStats(ramp.scheduler.TickStats):
+        """Keeps (time, lateness µs, overruns so far) of every tick, not just a window."""
+
+        def record(self, late_s: float) -> None:
+            samples.append((time.monotonic(), late_s * 1e6, self.overruns))
+            super().record(late_s)
+
+    class ObservedSupervisor(ramp.supervisor.Supervisor):
+        """Copies the drivers' counters before shutdown (they are not exposed over MCP)."""
+
+        def shutdown(self) -> None:
+            for name, bus in self.buses.items():
+                stats = getattr(bus, "stats", None)
+                if isinstance(stats, dict):
+                    bus_stats[name] = dict(stats)
+            super().shutdown()
+
+    # Both names are looked up when the objects are built, so the hooks are in place for the
+    # unchanged `ramp run` code path below.
+    ramp.scheduler.TickStats = RecordingTickStats  # type: ignore[misc]
+    ramp.supervisor.Supervisor = ObservedSupervisor  # type: ignore[misc]
+    code = ramp.cli.main(["run", "--config", args.config, "--sim", "--host", "127.0.0.1",
+                          "--port", "0", "--log-level", args.log_level])
+    Path(args.dump).write_text(json.dumps({"exit": code, "samples": samples,
+                                           "bus_stats": bus_stats}))
+    return code
+
+
+# -- select loop (tick baseline) ----------------------------------------------------------------
+def _wait_until(deadline: float, fd: int) -> bool:
+    """Wait for `deadline` in select with a µs timeout; False when `fd` became readable."""
+    while True:
+        remaining = deadline - time.monotonic()
+        if remaining <= 0:
+            return True
+        readable, _, _ = select.select([fd], [], [], remaining)
+        if readable:
+            return False
+
+
+def select_loop(args: argparse.Namespace) -> int:
+    """Same deadline rule as the scheduler (missed ticks skipped), doing nothing per tick.
+
+    Like the supervisor's loop it waits in `select` on one descriptor (stdin here, its
+    listening socket there); a line on stdin ends the loop, then every (time, lateness µs)
+    sample is printed as one JSON line, so the parent can cut the same window it measured
+    the supervisor in."""
+    period = 1.0 / args.rate
+    samples: list[tuple[float, float]] = []
+    stdin = sys.stdin.fileno()
+    print("start", flush=True)
+    deadline = time.monotonic() + period
+    while _wait_until(deadline, stdin):
+        now = time.monotonic()
+        late = now - deadline
+        samples.append((now, late * 1e6))
+        deadline += (1 + int(late // period)) * period
+    sys.stdin.readline()
+    print(json.dumps({"samples": samples}), flush=True)
+    return 0
+
+
+# -- echo (round-trip baseline) -----------------------------------------------------------------
+def echo(args: argparse.Namespace) -> int:
+    """Each complete line in is answered by one fixed line of `--size` bytes (with `\\n`)."""
+    answer = b"x" * (args.size - 1) + b"\n"
+    sel = selectors.DefaultSelector()
+    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    server.bind(("127.0.0.1", 0))
+    server.listen(64)
+    server.setblocking(False)
+    sel.register(server, selectors.EVENT_READ)
+    pending: dict[socket.socket, bytearray] = {}
+    stop = False
+
+    def on_term(signum: int, frame: object) -> None:
+        nonlocal stop
+        stop = True
+
+    signal.signal(signal.SIGTERM, on_term)
+    print(f"ready on 127.0.0.1:{server.getsockname()[1]}", flush=True)
+
+    def drop(sock: socket.socket) -> None:
+        sel.unregister(sock)
+        pending.pop(sock, None)
+        sock.close()
+
+    def flush(sock: socket.socket) -> None:
+        out = pending[sock]
+        try:
+            n = sock.send(out)
+        except BlockingIOError:
+            n = 0
+        except OSError:
+            drop(sock)
+            return
+        del out[:n]
+        sel.modify(sock, selectors.EVENT_READ | (selectors.EVENT_WRITE if out else 0))
+
+    while not stop:
+        for key, events in sel.select(0.5):
+            sock = key.fileobj
+            assert isinstance(sock, socket.socket)
+            if sock is server:
+                try:
+                    conn, _ = server.accept()
+                except BlockingIOError:
+                    continue
+                conn.setblocking(False)
+                conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                pending[conn] = bytearray()
+                sel.register(conn, selectors.EVENT_READ)
+                continue
+            if events & selectors.EVENT_READ:
+                try:
+                    data = sock.recv(65536)
+                except BlockingIOError:
+                    continue
+                except OSError:
+                    data = b""
+                if not data:
+                    drop(sock)
+                    continue
+                pending[sock] += answer * data.count(b"\n")
+            if sock in pending:
+                flush(sock)
+    return 0
+
+
+# -- relay (wire baseline) ----------------------------------------------------------------------
+_REQUEST = re.compile(rb"(\w+):(\w+)\.(\w+)=\(([^)]*)\)")
+
+
+def relay(args: argparse.Namespace) -> int:
+    """TCP lines -> Sabertooth packets, straight through: no pacing, no refresh, no routing
+    table beyond the four wheels, and a watchdog that is a select timeout."""
+    import serial
+
+    from ramp.hal.sabertooth_codec import encode_motor
+
+    wheels: dict[str, tuple[int, int, int, float]] = {
+        w["name"]: (w["address"], w["motor"], w["polarity"], w["full_duty"])
+        for w in json.loads(args.wheels)}
+    ser = serial.serial_for_url(args.port, baudrate=args.baud, timeout=0)
+    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+    stop = False
+
+    def on_term(signum: int, frame: object) -> None:
+        nonlocal stop
+        stop = True
+
+    signal.signal(signal.SIGTERM, on_term)
+    print(f"ready on 127.0.0.1:{server.getsockname()[1]}", flush=True)
+    clients: dict[socket.socket, bytes] = {}
+    armed_by: socket.socket | None = None
+    fed_at = 0.0
+
+    def packet(name: str, vel: float) -> bytes:
+        address, motor, polarity, full = wheels[name]
+        duty = max(-1.0, min(1.0, polarity * vel / 100.0 * full))
+        return encode_motor(address, motor, duty)
+
+    def zeros() -> bytes:
+        return b"".join(packet(n, 0) for n in wheels)
+
+    def handle(sock: socket.socket, line: bytes) -> None:
+        nonlocal armed_by, fed_at
+        if sock is armed_by:
+            fed_at = time.monotonic()
+        out = b""
+        moving: bool | None = None
+        for m in _REQUEST.finditer(line):
+            device, function = m.group(2).decode(), m.group(3)
+            params = [p.strip() for p in m.group(4).split(b",") if p.strip()]
+            if device in wheels and function == b"vel":
+                v = int(params[0])
+                out += packet(device, v)
+                moving = v != 0
+            elif device == "base" and function == b"drive":
+                s, d = float(params[0]), math.radians(float(params[1]))
+                left, right = s * (math.cos(d) + math.sin(d)), s * (math.cos(d) - math.sin(d))
+                scale = abs(s) / max(abs(left), abs(right)) if max(abs(left), abs(right)) else 0
+                for n in wheels:
+                    out += packet(n, round((left if n[0] == "l" else right) * scale))
+                moving = s != 0
+            elif device == "base" and function == b"stop":
+                out += zeros()
+                moving = False
+        if out:
+            ser.write(out)
+        if moving is True:
+            armed_by, fed_at = sock, time.monotonic()
+        elif moving is False:
+            armed_by = None
+        sock.sendall(b"\n")
+
+    while not stop:
+        timeout = 0.5 if armed_by is None else max(0.0, fed_at + args.timeout - time.monotonic())
+        r, _, _ = select.select([server, *clients], [], [], timeout)
+        if armed_by is not None and time.monotonic() - fed_at >= args.timeout:
+            ser.write(zeros())
+            armed_by = None
+        for sock in r:
+            if sock is server:
+                conn, _ = server.accept()
+                conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                clients[conn] = b""
+                continue
+            try:
+                data = sock.recv(65536)
+            except OSError:
+                data = b""
+            if not data:
+                del clients[sock]
+                sock.close()
+                if sock is armed_by:
+                    ser.write(zeros())
+                    armed_by = None
+                continue
+            buf = clients[sock] + data
+            *lines, clients[sock] = buf.split(b"\n")
+            for line in lines:
+                handle(sock, line)
+    ser.close()
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m bench.child")
+    sub = parser.add_subparsers(dest="what", required=True)
+    p = sub.add_parser("supervisor")
+    p.add_argument("--config", required=True)
+    p.add_argument("--dump", required=True)
+    p.add_argument("--log-level", default="warning")
+    p.set_defaults(func=supervisor)
+    p = sub.add_parser("select-loop")
+    p.add_argument("--rate", type=float, required=True)
+    p.set_defaults(func=select_loop)
+    p = sub.add_parser("echo")
+    p.add_argument("--size", type=int, required=True)
+    p.set_defaults(func=echo)
+    p = sub.add_parser("relay")
+    p.add_argument("--port", required=True)
+    p.add_argument("--baud", type=int, default=9600)
+    p.add_argument("--timeout", type=float, required=True)
+    p.add_argument("--wheels", required=True, help="JSON list of wheel wiring")
+    p.set_defaults(func=relay)
+    args = parser.parse_args(argv)
+    code: int = args.func(args)
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

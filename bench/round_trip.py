@@ -1,0 +1,184 @@
+"""`round_trip`: `base:base.get=()` over MCP, one at a time and pipelined.
+
+The supervisor is `ramp run --sim` with the MARTE configuration. The baseline, measured in
+the same run with the same client code, is a minimal Python `selectors` server that answers
+each line with a line of the same size as base.get's response, so the ratio is what RAMP's
+parsing, routing, get collection and formatting cost over moving the bytes. The supervisor's
+own tick lateness during each pipelined phase comes from its lateness samples.
+"""
+
+from __future__ import annotations
+
+import json
+import select
+import socket
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+from bench.common import (
+    PYTHON,
+    Child,
+    Settings,
+    compare,
+    connect,
+    progress,
+    start_supervisor,
+    summary,
+    versus,
+    write_config,
+)
+from bench.tick import window
+
+REQUEST = b"base:base.get=()\n"
+
+
+def _recv_line(sock: socket.socket) -> bytes:
+    buf = b""
+    while not buf.endswith(b"\n"):
+        chunk = sock.recv(65536)
+        if not chunk:
+            raise ConnectionError("server closed the connection")
+        buf += chunk
+    return buf
+
+
+def sequential(port: int, requests: int, warmup: int) -> list[float]:
+    """Round trips in µs of `requests` requests, each sent after the previous answer."""
+    with connect(port) as sock:
+        for _ in range(warmup):
+            sock.sendall(REQUEST)
+            _recv_line(sock)
+        out: list[float] = []
+        for _ in range(requests):
+            t0 = time.perf_counter()
+            sock.sendall(REQUEST)
+            _recv_line(sock)
+            out.append((time.perf_counter() - t0) * 1e6)
+    return out
+
+
+def _open_clients(port: int, count: int) -> list[socket.socket]:
+    """`count` connections, each proven to be served (not refused as busy) by one request."""
+    socks: list[socket.socket] = []
+    deadline = time.monotonic() + 5
+    try:
+        while len(socks) < count:
+            sock = connect(port)
+            sock.sendall(REQUEST)
+            line = _recv_line(sock)
+            if b"error=(busy" in line:  # the previous phase's clients are still closing
+                sock.close()
+                if time.monotonic() > deadline:
+                    raise ConnectionError(f"server stays busy: {line!r}")
+                time.sleep(0.05)
+                continue
+            socks.append(sock)
+    except BaseException:
+        for s in socks:
+            s.close()
+        raise
+    return socks
+
+
+def pipelined(port: int, clients: int, in_flight: int, duration: float) -> dict[str, Any]:
+    """Each client keeps `in_flight` requests outstanding; answers counted after a warm-up."""
+    socks = _open_clients(port, clients)
+    sent: dict[int, deque[float]] = {s.fileno(): deque() for s in socks}
+    by_fd = {s.fileno(): s for s in socks}
+    latency: list[float] = []
+    warm = min(0.25, duration / 4)
+    start = time.monotonic()
+    count_from, end = start + warm, start + warm + duration
+    try:
+        for sock in socks:
+            sent[sock.fileno()].extend([time.perf_counter()] * in_flight)
+            sock.sendall(REQUEST * in_flight)
+        answered = 0
+        while True:
+            now = time.monotonic()
+            if now >= end:
+                break
+            readable, _, _ = select.select(socks, [], [], end - now)
+            counting = time.monotonic() >= count_from
+            for sock in readable:
+                data = sock.recv(1 << 18)
+                if not data:
+                    raise ConnectionError("server closed a pipelining client")
+                n = data.count(b"\n")
+                t = time.perf_counter()
+                q = sent[sock.fileno()]
+                for _ in range(n):
+                    sent_at = q.popleft()
+                    if counting:
+                        latency.append((t - sent_at) * 1e6)
+                if counting:
+                    answered += n
+                q.extend([t] * n)
+                by_fd[sock.fileno()].sendall(REQUEST * n)
+        t_end = time.monotonic()
+    finally:
+        for sock in socks:
+            sock.close()
+    return {"req_per_s": round(answered / (t_end - count_from)), "latency_us": summary(latency),
+            "window": (count_from, t_end)}
+
+
+def measure(port: int, settings: Settings, label: str) -> dict[str, Any]:
+    progress(f"round_trip: {label}: {settings.rt_requests} sequential requests")
+    out: dict[str, Any] = {"sequential_rtt_us": summary(
+        sequential(port, settings.rt_requests, settings.rt_warmup))}
+    for n in settings.tp_clients:
+        progress(f"round_trip: {label}: {n} clients x {settings.tp_in_flight} in flight, "
+                 f"{settings.tp_duration_s:g} s")
+        out[f"clients_{n}"] = pipelined(port, n, settings.tp_in_flight, settings.tp_duration_s)
+        time.sleep(0.1)  # let the server see the previous clients' close
+    return out
+
+
+def run(settings: Settings, workdir: Path) -> dict[str, Any]:
+    config = write_config(workdir, "round_trip")
+    child, port, dump = start_supervisor("round_trip", config, workdir)
+    try:
+        with connect(port) as sock:
+            sock.sendall(REQUEST)
+            response_bytes = len(_recv_line(sock))
+        ramp = measure(port, settings, "supervisor")
+        child.terminate()
+    finally:
+        child.kill()
+    samples = json.loads(dump.read_text())["samples"]
+
+    echo = Child("echo", [PYTHON, "-m", "bench.child", "echo", "--size", str(response_bytes)],
+                 workdir)
+    try:
+        m = echo.expect(r"ready on [\d.]+:(\d+)", 30)
+        base = measure(int(m.group(1)), settings, "baseline echo server")
+        echo.terminate()
+    finally:
+        echo.kill()
+
+    out: dict[str, Any] = {
+        "request": REQUEST.decode().strip(),
+        "response_bytes": response_bytes,
+        "baseline": {"what": "minimal Python selectors line server answering each line with "
+                             f"{response_bytes} bytes",
+                     "sequential_rtt_us": base["sequential_rtt_us"]},
+        "sequential": {"requests": settings.rt_requests,
+                       "rtt_us": versus(ramp["sequential_rtt_us"], base["sequential_rtt_us"])},
+        "pipelined": {"in_flight_per_client": settings.tp_in_flight,
+                      "duration_s": settings.tp_duration_s},
+    }
+    for n in settings.tp_clients:
+        fig, ref = ramp[f"clients_{n}"], base[f"clients_{n}"]
+        late, overruns = window(samples, *fig["window"])
+        out["pipelined"][f"clients_{n}"] = {
+            "req_per_s": compare(fig["req_per_s"], ref["req_per_s"]),
+            "latency_us": {k: compare(fig["latency_us"][k], ref["latency_us"][k])
+                           for k in ("p50", "p99", "max")},
+            # How the supervisor's own ticks fared while it was saturated.
+            "tick_late_us": summary(late),
+            "tick_overruns": overruns,
+        }
+    return out

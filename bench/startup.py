@@ -1,0 +1,99 @@
+"""`startup`: process start to `ramp: ready`, resident memory, and SIGTERM to exit.
+
+The real command line, `python -m ramp.cli run --sim` with the repository's ramp.yaml (no
+bench hooks), started several times; the median is reported. The baseline is a bare
+interpreter printing the same line (`python -c 'print(...)'`), interleaved run by run so a
+busy moment hits both. The last process of each kind stays up for the memory reading.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from pathlib import Path
+from typing import Any
+
+from bench.common import MARTE_YAML, PYTHON, Child, Settings, compare, progress
+
+READY = r"ramp: ready on "
+RAMP_ARGV = [PYTHON, "-m", "ramp.cli", "run", "--sim", "--config", str(MARTE_YAML),
+             "--host", "127.0.0.1", "--port", "0", "--log-level", "warning"]
+BARE_ARGV = [PYTHON, "-c",
+             "import time; print('ramp: ready on 127.0.0.1:0', flush=True); time.sleep(3600)"]
+
+
+def _start(name: str, argv: list[str], workdir: Path) -> tuple[Child, float]:
+    t0 = time.monotonic()
+    child = Child(name, argv, workdir)
+    try:
+        child.expect(READY, 30)
+    except BaseException:
+        child.kill()
+        raise
+    return child, (time.monotonic() - t0) * 1e3
+
+
+def _stop_ms(child: Child) -> float:
+    t0 = time.monotonic()
+    child.terminate()
+    return (time.monotonic() - t0) * 1e3
+
+
+def run(settings: Settings, workdir: Path) -> dict[str, Any]:
+    ramp_ms: list[float] = []
+    bare_ms: list[float] = []
+    ramp_stop: list[float] = []
+    bare_stop: list[float] = []
+    progress(f"startup: {settings.startup_runs} starts of ramp run --sim and of a bare "
+             "interpreter")
+    ramp = bare = None
+    try:
+        for i in range(settings.startup_runs):
+            last = i == settings.startup_runs - 1
+            ramp, ms = _start("ramp", RAMP_ARGV, workdir)
+            ramp_ms.append(ms)
+            bare, ms = _start("bare", BARE_ARGV, workdir)
+            bare_ms.append(ms)
+            if not last:
+                ramp_stop.append(_stop_ms(ramp))
+                bare_stop.append(_stop_ms(bare))
+        assert ramp is not None and bare is not None
+        rss_ready = (ramp.status_kb("VmRSS"), bare.status_kb("VmRSS"))
+        progress(f"startup: resident memory after {settings.rss_after_s:g} s")
+        time.sleep(settings.rss_after_s)
+        rss_later = (ramp.status_kb("VmRSS"), bare.status_kb("VmRSS"))
+        hwm = (ramp.status_kb("VmHWM"), bare.status_kb("VmHWM"))
+        threads = ramp.status_kb("Threads")
+        ramp_stop.append(_stop_ms(ramp))
+        bare_stop.append(_stop_ms(bare))
+    finally:
+        for child in (ramp, bare):
+            if child is not None:
+                child.kill()
+
+    def mb(kb: int | None) -> float | None:
+        return None if kb is None else round(kb / 1024, 1)
+
+    return {
+        "command": " ".join(["python", *RAMP_ARGV[1:]]).replace(str(MARTE_YAML), "ramp.yaml"),
+        "baseline": {"what": "bare interpreter: python -c \"print('ramp: ready ...')\""},
+        "runs": settings.startup_runs,
+        "start_to_ready_ms": {
+            "median": compare(round(statistics.median(ramp_ms), 1),
+                              round(statistics.median(bare_ms), 1)),
+            "min": compare(round(min(ramp_ms), 1), round(min(bare_ms), 1)),
+            "max": compare(round(max(ramp_ms), 1), round(max(bare_ms), 1)),
+            "values": [round(v, 1) for v in ramp_ms],
+            "baseline_values": [round(v, 1) for v in bare_ms],
+        },
+        "rss_mb_at_ready": compare(mb(rss_ready[0]), mb(rss_ready[1])),
+        "rss_mb_after": {"seconds": settings.rss_after_s,
+                         **compare(mb(rss_later[0]), mb(rss_later[1]))},
+        "peak_rss_mb": compare(mb(hwm[0]), mb(hwm[1])),
+        "threads": threads,  # the stall guard is the one extra thread
+        "sigterm_to_exit_ms": {
+            "median": compare(round(statistics.median(ramp_stop), 1),
+                              round(statistics.median(bare_stop), 1)),
+            "max": compare(round(max(ramp_stop), 1), round(max(bare_stop), 1)),
+        },
+    }
