@@ -89,6 +89,7 @@ class Scheduler:
         self.tasks: list[ScheduledTask] = []
         self.stats = TickStats()
         self._readers: dict[int, IoCallback] = {}
+        self._rotation = 0
         self._writers: dict[int, IoCallback] = {}
         self._next: float | None = None
         self._index = 0
@@ -154,8 +155,13 @@ class Scheduler:
         self._wait(self._next)
         self._tick(self._next)
 
-    def poll_io(self, timeout: float = 0.0) -> int:
-        """Dispatch ready I/O once; returns how many callbacks ran."""
+    def poll_io(self, timeout: float = 0.0, deadline: float | None = None) -> int:
+        """Dispatch ready I/O once; returns how many callbacks ran.
+
+        With a `deadline`, dispatching stops once the clock passes it: the tick comes first,
+        and whatever was not served is still readable on the next pass. The order rotates
+        each pass so a busy client early in the list cannot starve the ones after it.
+        """
         self.alive_at = time.perf_counter()
         if not self._readers and not self._writers:
             return 0
@@ -166,16 +172,20 @@ class Scheduler:
         except (OSError, ValueError):
             self._drop_bad_fds()
             return 0
-        for fd in r:
-            cb = self._readers.get(fd)
+        ready = [(fd, True) for fd in w] + [(fd, False) for fd in r]  # output first: it frees
+        if len(ready) > 1:
+            self._rotation = (self._rotation + 1) % len(ready)
+            ready = ready[self._rotation:] + ready[:self._rotation]
+        ran = 0
+        for fd, writable in ready:
+            if ran and deadline is not None and self.clock.now() >= deadline:
+                break
+            cb = (self._writers if writable else self._readers).get(fd)
             if cb is not None:
-                self._guard(cb, f"input on fd {fd}")
-        for fd in w:
-            cb = self._writers.get(fd)
-            if cb is not None:
-                self._guard(cb, f"output on fd {fd}")
+                self._guard(cb, f"{'output' if writable else 'input'} on fd {fd}")
+                ran += 1
         self.alive_at = time.perf_counter()
-        return len(r) + len(w)
+        return ran
 
     def _wait(self, deadline: float) -> None:
         if isinstance(self.clock, VirtualClock):
@@ -183,17 +193,20 @@ class Scheduler:
             if self.clock.now() < deadline:
                 self.clock.set(deadline)
             return
+        polled = False
         while True:
             remaining = deadline - self.clock.now()
             if remaining <= 0:
-                self.poll_io(0.0)
+                if not polled:  # a late tick still lets one client's turn through
+                    self.poll_io(0.0, deadline)
                 return
+            polled = True
             if not self._readers and not self._writers:
                 # Nothing to watch: sleep the remainder with a µs-precise wait.
                 self.alive_at = time.perf_counter()
                 select.select([], [], [], remaining)
                 continue
-            self.poll_io(remaining)
+            self.poll_io(remaining, deadline)
 
     def _tick(self, deadline: float) -> None:
         now = self.clock.now()

@@ -255,14 +255,20 @@ def format_value(v: object) -> str:
 
     Accepts anything integral or real (numpy scalars too), so callers need not convert.
     """
-    if isinstance(v, str):
-        return v
-    if isinstance(v, bool):
-        return "1" if v else "0"
-    if isinstance(v, Integral):
-        return str(int(v))
-    if isinstance(v, Real):
-        x = float(v)
+    t = type(v)  # exact-type fast path: the ABC checks below cost ~1 us each on a hot path
+    if t is str:
+        return v  # type: ignore[return-value]
+    if t is int:
+        return str(v)
+    if t is not float:
+        if isinstance(v, str):
+            return v
+        if isinstance(v, bool):
+            return "1" if v else "0"
+        if isinstance(v, Integral):
+            return str(int(v))
+    if t is float or isinstance(v, Real):
+        x = float(v)  # type: ignore[arg-type]
         if not math.isfinite(x):
             raise ValueError(f"MCP cannot carry a non-finite float: {x!r}")
         text = f"{x:.3f}".rstrip("0")

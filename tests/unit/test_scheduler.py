@@ -106,3 +106,27 @@ def test_a_closed_fd_left_registered_is_dropped() -> None:
     os.close(w)
     s.run_for(0.05)  # must not raise or spin
     assert r not in s._readers
+
+
+def test_io_dispatch_stops_at_the_deadline_and_rotates() -> None:
+    clock = VirtualClock()
+    s = Scheduler(clock, 100)
+    pairs = [socket.socketpair() for _ in range(3)]
+    served: list[int] = []
+
+    def serve(i: int) -> None:
+        served.append(i)
+        clock.advance(0.004)  # each client's turn costs 4 ms
+
+    for i, (a, b) in enumerate(pairs):
+        s.add_reader(a.fileno(), lambda i=i: serve(i))
+        b.send(b"x")  # never read: stays readable
+    assert s.poll_io(0.0, deadline=clock.now() + 0.005) == 2  # the third waits for the tick
+    first = served[:]
+    served.clear()
+    assert s.poll_io(0.0, deadline=clock.now() + 0.005) == 2
+    assert served != first  # the next pass starts with someone else
+    assert s.poll_io(0.0) == 3  # no deadline: everyone
+    for a, b in pairs:
+        a.close()
+        b.close()
