@@ -36,6 +36,7 @@ class ScheduledTask:
     name: str
     divisor: int
     fn: TaskFn
+    next_index: int = 0  # the first base tick (on the grid) at which it runs again
     last_run: float | None = None
     runs: int = 0
     errors: int = 0
@@ -109,7 +110,7 @@ class Scheduler:
         if divisor < 1 or abs(ratio - divisor) > 1e-6:
             raise ValueError(
                 f"task {name}: {rate_hz} Hz does not divide the base rate {self.rate_hz:g} Hz")
-        task = ScheduledTask(name, divisor, fn)
+        task = ScheduledTask(name, divisor, fn, next_index=self._index)
         self.tasks.append(task)
         return task
 
@@ -215,8 +216,11 @@ class Scheduler:
         missed = int(late // self.period)
         worst_name, worst_s = "", 0.0
         for task in list(self.tasks):
-            if not task.enabled or self._index % task.divisor:
+            # Skipped ticks move the index in jumps; a task runs at the first tick at or past
+            # its slot (never twice to catch up), then waits for its next slot on the grid.
+            if not task.enabled or self._index < task.next_index:
                 continue
+            task.next_index = (self._index // task.divisor + 1) * task.divisor
             tdt = task.divisor * self.period if task.last_run is None else now - task.last_run
             task.last_run = now
             self.current_task = task.name

@@ -130,3 +130,25 @@ def test_io_dispatch_stops_at_the_deadline_and_rotates() -> None:
     for a, b in pairs:
         a.close()
         b.close()
+
+
+def test_slower_tasks_keep_running_when_overruns_skip_ticks_unevenly() -> None:
+    """Skips of 1 and 2 ticks used to leave the index odd forever, starving every task with
+    an even divisor (the lift controller, the hot-plug retry)."""
+    clock = VirtualClock()
+    s = Scheduler(clock, 100)
+    runs = {"50": 0, "1": 0}
+    state = {"n": 0}
+
+    def heavy(now: float, dt: float) -> None:
+        state["n"] += 1
+        clock.advance(0.025 if state["n"] == 7 else 0.015)  # 1.5 periods, once 2.5
+
+    s.add_task("heavy", 100, heavy)
+    s.add_task("fifty", 50, lambda now, dt: runs.__setitem__("50", runs["50"] + 1))
+    s.add_task("one", 1, lambda now, dt: runs.__setitem__("1", runs["1"] + 1))
+    s.run_for(10.0)
+    # every tick overruns, so about 1 in 2 base ticks runs; the 50 Hz task still runs at
+    # every run tick at or past its slot, and the 1 Hz task once a second
+    assert runs["50"] > 400
+    assert 9 <= runs["1"] <= 11
