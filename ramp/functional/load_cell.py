@@ -6,9 +6,11 @@ lift angle: `tare()` lets the operator zero it with the bin empty, in the pose t
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
+from ramp.errors import RequestError
 from ramp.hal.interfaces import BridgeInput
 from ramp.schema import Field
 
@@ -41,4 +43,7 @@ class LoadCell:
     def tare(self) -> None:
         """Take the current reading as zero (kept until restart; the YAML offset is the boot
         value)."""
-        self.offset_mv_v = self.channel.read()
+        reading = self.channel.read()
+        if not math.isfinite(reading):
+            raise RequestError("fault", "no reading from the load cell to tare with")
+        self.offset_mv_v = reading

@@ -18,6 +18,7 @@ the position does not progress by `stall_min_change` (scaled by the commanded sp
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any, Literal
 
@@ -137,14 +138,23 @@ class ThompsonActuator:
         self._hold_step(pos)
 
     def stop(self) -> None:
-        """Motor to zero, any move cancelled, a stall fault cleared."""
+        """Motor to zero, any move cancelled. A latched stall stays latched: a watchdog trip,
+        a takeover or a re-attach must not silently re-arm a jammed lift (`clear_fault`)."""
         self.mode, self.target, self._seeking = "idle", None, False
-        self.fault = ""
         self._drive(0)
+
+    def clear_fault(self) -> None:
+        """An operator's explicit stop of the module: the stall has been seen."""
+        self.fault = ""
 
     # -- control ------------------------------------------------------------------------------
     def tick(self, now: float, dt: float) -> None:
         pos = self.position
+        if not math.isfinite(pos):  # no pot reading: no end stops, no positioning
+            if self.motor.velocity != 0 or self.mode != "idle":
+                self.mode, self.target, self._seeking = "idle", None, False
+                self._drive(0)
+            return
         out = self.motor.velocity
         if out != 0 and self._stall_check(now, pos, out):
             return
@@ -228,3 +238,5 @@ class ThompsonActuator:
     def _refuse_if_faulted(self) -> None:
         if self.fault:
             raise RequestError("fault", self.fault)
+        if not math.isfinite(self.position):
+            raise RequestError("fault", "lift position unknown: no reading from lift_pot")

@@ -92,9 +92,14 @@ class BleModule(Module):
         self.prop(Property("lift", "stalled", "int", lambda: int(self.lift.stalled)))
 
     def stop(self) -> None:
-        """Lift and chain to 0, any move cancelled, a lift stall fault cleared."""
+        """Lift and chain to 0, any move cancelled (a latched lift stall stays latched)."""
         self.lift.stop()
         self.chain.stop()
+
+    def _stop_request(self) -> None:
+        """`ble:ble.stop=()` from an operator also clears a latched lift stall."""
+        self.stop()
+        self.lift.clear_fault()
 
     def is_moving(self) -> bool:
         return self.lift.is_moving() or self.chain.is_moving()

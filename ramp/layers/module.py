@@ -8,13 +8,14 @@ ownership, watchdog); this layer finds the function and types the parameters.
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
 from ramp.errors import RequestError
-from ramp.mcp.messages import Request, Response, Value
+from ramp.mcp.messages import Request, Response, Value, error_response
 from ramp.mcp.params import BadParam, Param, convert_all, signature
 from ramp.schema import Field
 
@@ -106,7 +107,8 @@ class Module(ABC):
         """The function a request names with its typed parameters, or RequestError."""
         fn = self.functions.get((req.device, req.function))
         if fn is None:
-            if not any(dev == req.device for dev, _ in self.functions):
+            if not any(dev == req.device for dev, _ in self.functions) and not any(
+                    p.device == req.device for p in self.properties):
                 raise RequestError("unknown_device", f"{self.name} has no device {req.device}")
             raise RequestError(
                 "unknown_function", f"{req.device} has no function {req.function}")
@@ -117,7 +119,17 @@ class Module(ABC):
         return fn, values
 
     def _get(self) -> list[Response]:
-        return [Response(self.name, p.device, p.name, (p.read(),)) for p in self.properties]
+        """Every row; a reading MCP cannot carry (NaN: a sensor not heard from, saturated)
+        answers an error for that row alone, so the rest of the message still gets through."""
+        out = []
+        for p in self.properties:
+            value = p.read()
+            if isinstance(value, float) and not math.isfinite(value):
+                out.append(error_response(self.name, p.device, "fault",
+                                          f"no reading for {p.device}.{p.name}"))
+            else:
+                out.append(Response(self.name, p.device, p.name, (value,)))
+        return out
 
     def _stop_request(self) -> None:
         self.stop()

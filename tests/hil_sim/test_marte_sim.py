@@ -204,3 +204,10 @@ def test_drive_tests_pass_on_either_motor_driver(any_drive: SimHarness) -> None:
     h.advance(0.5)
     assert all(abs(h.world.wheel_speed(f"base.{w}")) < 0.02
                for w in ("lf_wheel", "lb_wheel", "rf_wheel", "rb_wheel"))
+
+
+def test_a_read_only_device_answers_unknown_function(h: SimHarness) -> None:
+    c = h.connect()
+    assert c.ask("base:battery.volt=()").startswith(
+        "base:battery.error=(unknown_function,battery has no function volt)")
+    assert c.ask("base:wheel.vel=(1)").startswith("base:wheel.error=(unknown_device,")

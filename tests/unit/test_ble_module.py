@@ -3,6 +3,7 @@ task against a small plant, stall fault through the module, stop, is_moving, tar
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import pytest
@@ -282,3 +283,45 @@ def test_lift_hysteresis_must_be_below_tolerance() -> None:
     with pytest.raises(ConfigError) as e:
         build(settings={"lift": {"tolerance": 0.02, "hysteresis": 0.02}})
     assert e.value.key == "lift"
+
+
+def test_a_robot_wide_stop_keeps_the_stall_latched() -> None:
+    m, chans, world = build(pos=0.3, settings={"lift": {"stall_time": 1.0}})
+    world.stuck = True
+    call(m, "lift", "extend")
+    run(m, chans, world, 0.0, 1.2)
+    assert rows(m)["lift.stalled"] == 1
+    m.stop()  # what a watchdog trip, a takeover or a re-attach does
+    assert rows(m)["lift.stalled"] == 1
+    with pytest.raises(RequestError):
+        call(m, "lift", "extend")
+    call(m, "ble", "stop")  # the operator's explicit stop
+    assert rows(m)["lift.stalled"] == 0
+
+
+def test_no_pot_reading_stops_the_lift_and_refuses_lift_motion() -> None:
+    m, chans, world = build(pos=0.95)
+    call(m, "lift", "vel", "100")
+    assert chans["lift_motor"].duty == 1.0
+    chans["lift_pot"].read = lambda: math.nan  # a saturated or silent input
+    tasks = m.tasks()
+    for task in tasks:
+        task.run(0.02, 0.02)
+    assert chans["lift_motor"].duty == 0.0  # no end stops without a reading: stop
+    for fn, args in (("vel", ("50",)), ("extend", ()), ("pos", ("0.5",))):
+        with pytest.raises(RequestError) as e:
+            call(m, "lift", fn, *args)
+        assert e.value.code == "fault" and "no reading from lift_pot" in e.value.detail
+    call(m, "lift", "vel", "0")  # stopping is always accepted
+    got = call(m, "ble", "get")
+    assert got is not None
+    assert Response("ble", "lift", "error", ("fault", "no reading for lift.pos")) in got
+    assert any(r.device == "chain" and r.prop == "vel" for r in got)  # the other rows stay
+
+
+def test_tare_refuses_a_missing_reading() -> None:
+    m, chans, world = build()
+    chans["load_cell"].read = lambda: math.nan
+    with pytest.raises(RequestError) as e:
+        call(m, "load", "tare")
+    assert e.value.code == "fault"

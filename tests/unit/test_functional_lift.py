@@ -247,7 +247,9 @@ def test_stall_fault_latched_and_cleared_by_stop() -> None:
     assert rig.act.stalled
     rig.run(1.0)
     assert set(rig.duties[-50:]) == {0.0}  # stays stopped
-    rig.act.stop()
+    rig.act.stop()  # a watchdog trip or takeover does not clear the latch ...
+    assert rig.act.stalled
+    rig.act.clear_fault()  # ... the operator's explicit module stop does
     assert not rig.act.stalled
     rig.plant.stuck = False
     rig.act.extend()
