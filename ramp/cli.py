@@ -96,8 +96,12 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
     signal.signal(signal.SIGINT, on_signal)
     try:
         sup.start()
-    except OSError as exc:
-        log.error("cannot serve on %s:%s: %s", sup.server.host, sup.server.port, exc.strerror)
+    except Exception as exc:  # noqa: BLE001 - whatever failed, the motors must be stopped
+        if isinstance(exc, OSError):
+            log.error("cannot serve on %s:%s: %s", sup.server.host, sup.server.port,
+                      exc.strerror)
+        else:
+            log.exception("start-up failed")
         sup.shutdown()
         if backplane is not None:
             backplane.close()
@@ -108,9 +112,10 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
     guard.start()
     notifier.attach(sup)
     sup.settle()
-    h, p = sup.server.address
-    print(f"ramp: ready on {h}:{p}", flush=True)
-    notifier.ready(f"serving on {h}:{p}")
+    if not sup.scheduler.stopping:  # a signal during start-up: never announce ready
+        h, p = sup.server.address
+        print(f"ramp: ready on {h}:{p}", flush=True)
+        notifier.ready(f"serving on {h}:{p}")
     try:
         sup.scheduler.run()
     finally:

@@ -135,6 +135,11 @@ class Scheduler:
         """Ask `run` to return after the current iteration."""
         self._stop = True
 
+    @property
+    def stopping(self) -> bool:
+        """True once `stop()` was called (from a signal handler, say)."""
+        return self._stop
+
     def run(self, until: Callable[[], bool] | None = None) -> None:
         """Tick until `stop()` has been called or `until()` is true.
 

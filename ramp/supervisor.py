@@ -74,8 +74,11 @@ class Supervisor:
             port=port if port is not None else config.server.port,
             max_clients=config.server.max_clients, max_line=config.server.max_line,
             max_output=config.server.max_output)
+        # max_line already bounds a message's work; every well-formed one fits (>= 8 bytes each)
+        self._max_requests = max(256, config.server.max_line // 8 + 1)
         self.started_at = 0.0
         self.running = False
+        self._stop_pending = False  # set from the stall guard's thread
 
     # -- lifecycle ----------------------------------------------------------------------------
     def start(self) -> None:
@@ -89,9 +92,14 @@ class Supervisor:
         sched.add_task("buses", sched.rate_hz, self._tick_buses)
         sched.add_task("watchdog", sched.rate_hz, self.robot.tick)
         sched.add_task("hotplug", self._divisor_rate(1.0), self._retry_buses)
+        sched.add_task("safety", sched.rate_hz, self._safety_tick)
         for slot in self.slots.values():
             for task in slot.module.tasks():
-                sched.add_task(f"{slot.name}.{task.name}", task.rate_hz,
+                rate = self._divisor_rate(task.rate_hz)
+                if abs(rate - task.rate_hz) > 1e-9:
+                    log.info("task %s.%s runs at %g Hz (asked %g Hz; base rate %g Hz)",
+                             slot.name, task.name, rate, task.rate_hz, sched.rate_hz)
+                sched.add_task(f"{slot.name}.{task.name}", rate,
                                self._only_attached(slot, task.run))
         self.server.start()
         self.running = True
@@ -112,24 +120,28 @@ class Supervisor:
             return
         self.running = False
         self.robot.stop_all("shutdown")
-        for name, bus in self.buses.items():
-            try:
-                bus.stop_motors()
-            except Exception as exc:  # noqa: BLE001 - keep stopping the others
-                log.error("bus %s: could not stop motors at shutdown: %s", name, exc)
-            bus.close()
+        for bus in self.buses.values():
+            bus.close()  # zeros on the wire first, then the port closes
         self.server.close()
 
     def stop_all_motors(self) -> None:
-        """Last resort (stall guard, signals): zeros straight to every driver."""
+        """Last resort (the stall guard's thread): zeros straight to every driver. The loop
+        then stops every module on its next tick, so the layers above agree with the wire."""
+        self._stop_pending = True
         for name, bus in self.buses.items():
             try:
                 bus.stop_motors()
             except Exception as exc:  # noqa: BLE001
                 log.error("bus %s: could not stop motors: %s", name, exc)
 
+    def _safety_tick(self, now: float, dt: float) -> None:
+        """After a stall, the modules learn that their motors were stopped under them."""
+        if self._stop_pending:
+            self._stop_pending = False
+            self.robot.stop_all("tick loop stalled")
+
     def _divisor_rate(self, wanted_hz: float) -> float:
-        """The rate nearest `wanted_hz` that divides the base rate."""
+        """The rate nearest `wanted_hz` that divides the base rate (at most the base rate)."""
         divisor = max(1, round(self.scheduler.rate_hz / wanted_hz))
         return self.scheduler.rate_hz / divisor
 
@@ -139,7 +151,7 @@ class Supervisor:
         if isinstance(msg, TooLong):
             self.robot.feed(conn, now)
             return [too_long_response(self.config.server.max_line)]
-        parsed = parse_message(msg)
+        parsed = parse_message(msg, max_requests=self._max_requests)
         return self.robot.handle(conn, parsed.requests, now, parsed.syntax_error)
 
     def _health(self) -> Health:

@@ -12,6 +12,7 @@ bus's `tick` collected, writes are queued and flushed by `tick`.
 
 from __future__ import annotations
 
+import logging
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
@@ -167,8 +168,9 @@ class Bus(ABC):
             return
         try:
             self.stop_motors()
-        except Exception:  # noqa: BLE001 - closing must always finish
-            pass
+        except Exception as exc:  # noqa: BLE001 - closing must always finish
+            logging.getLogger("ramp.hal").error("bus %s: could not stop motors on close: %s",
+                                                self.name, exc)
         finally:
             self.is_open = False
             self._close()

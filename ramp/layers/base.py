@@ -120,9 +120,9 @@ class BaseModule(Module):
         """Buttons at 100 Hz (20 ms debounce needs the resolution), the battery filter at
         50 Hz, the LED display at 20 Hz (a 2 Hz blink needs far less)."""
         return [
-            Task(f"{self.name}.buttons", 100.0, self._buttons_tick),
-            Task(f"{self.name}.battery", 50.0, self.voltage.tick),
-            Task(f"{self.name}.leds", 20.0, self._leds_tick),
+            Task("buttons", 100.0, self._buttons_tick),
+            Task("battery", 50.0, self.voltage.tick),
+            Task("leds", 20.0, self._leds_tick),
         ]
 
     def _buttons_tick(self, now: float, dt: float) -> None:

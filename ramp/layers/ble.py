@@ -107,4 +107,4 @@ class BleModule(Module):
     def tasks(self) -> list[Task]:
         """The lift controller at 50 Hz: 0.002 of stroke per tick at full speed (10 s
         stroke), far inside the 0.01 stop band."""
-        return [Task(f"{self.name}.lift", 50.0, self.lift.tick)]
+        return [Task("lift", 50.0, self.lift.tick)]

@@ -163,17 +163,28 @@ class RobotDistribution:
         except RequestError as exc:
             return [error_response(req.module, req.device, exc.code, exc.detail)]
         except DeviceError as exc:
+            self._half_done(fn, target)
             if self.on_device_error is not None:
                 self.on_device_error(req.module, exc)
             return [error_response(req.module, req.device, "fault", str(exc))]
         except Exception as exc:
             log.exception("request %s:%s.%s failed", req.module, req.device, req.function)
+            self._half_done(fn, target)
             return [error_response(req.module, req.device, "fault",
                                    f"internal error {type(exc).__name__}")]
         finally:
             self._client = None
         self._after(fn, client, now)
         return result or []
+
+    def _half_done(self, fn: Function, target: Module) -> None:
+        """A motion request that failed part-way may have started some motors with the
+        watchdog idle: stop that module."""
+        if fn.kind == "motion":
+            try:
+                target.stop()
+            except Exception:
+                log.exception("module %s failed to stop", target.name)
 
     def _after(self, fn: Function, client: Client, now: float) -> None:
         """Watchdog bookkeeping once a request was accepted."""
@@ -221,13 +232,8 @@ class RobotDistribution:
         return any(s.state == "ok" and s.module.is_moving() for s in self.slots.values())
 
     def stop_all(self, reason: str) -> None:
-        """Every attached module stops all motion."""
-        for slot in self.slots.values():
-            if slot.state == "ok":
-                try:
-                    slot.module.stop()
-                except Exception:
-                    log.exception("module %s failed to stop (%s)", slot.name, reason)
+        """Every attached module stops all motion; nothing is left for the watchdog."""
+        self._stop_keep_trip(reason)
         self.watchdog.disarm()
 
     def tick(self, now: float, dt: float) -> None:
@@ -236,7 +242,7 @@ class RobotDistribution:
             peer = getattr(self.watchdog.feeder, "peer", "?")
             log.warning("watchdog expired: %s silent for %.2f s; stopping every module",
                         peer, now - self.watchdog.last_feed)
-            self._stop_keep_trip()
+            self._stop_keep_trip("watchdog expired")
 
     def client_lost(self, client: Client) -> None:
         if self.control.owner is client:
@@ -246,15 +252,16 @@ class RobotDistribution:
         if self.watchdog.client_lost(client):
             log.warning("watchdog tripped: commanding client %s disconnected; stopping every"
                         " module", client.peer)
-            self._stop_keep_trip()
+            self._stop_keep_trip("commanding client lost")
 
-    def _stop_keep_trip(self) -> None:
+    def _stop_keep_trip(self, reason: str) -> None:
+        """Every attached module stops; the watchdog state is left to the caller."""
         for slot in self.slots.values():
             if slot.state == "ok":
                 try:
                     slot.module.stop()
                 except Exception:
-                    log.exception("module %s failed to stop", slot.name)
+                    log.exception("module %s failed to stop (%s)", slot.name, reason)
 
     # -- health -------------------------------------------------------------------------------
     def health_rows(self) -> list[Response]:

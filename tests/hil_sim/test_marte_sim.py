@@ -211,3 +211,18 @@ def test_a_read_only_device_answers_unknown_function(h: SimHarness) -> None:
     assert c.ask("base:battery.volt=()").startswith(
         "base:battery.error=(unknown_function,battery has no function volt)")
     assert c.ask("base:wheel.vel=(1)").startswith("base:wheel.error=(unknown_device,")
+
+
+def test_a_base_rate_the_tasks_do_not_divide_still_runs() -> None:
+    from tests.harness import MARTE_YAML
+
+    slow = MARTE_YAML.replace("scheduler: {rate_hz: 100}", "scheduler: {rate_hz: 30}")
+    assert slow != MARTE_YAML
+    h = SimHarness(slow)
+    try:
+        c = h.connect()
+        assert c.ask("robot:robot.modules=()") == "robot:robot.modules=(base,ble)"
+        drive(h, c, "ble:lift.pos=(0.3)", 5.0)
+        assert abs(num(c.ask("ble:ble.get=()"), "ble:lift.pos") - 0.3) <= 0.03
+    finally:
+        h.close()

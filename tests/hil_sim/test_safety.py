@@ -57,6 +57,7 @@ def test_a_stalled_task_has_its_motors_stopped_and_is_named(
             sup.scheduler.run_for(0.7)
     finally:
         guard.stop()
+    assert sup.slots["demo"].module.vel == 0  # the module caught up with the wire
     from_guard = [h for h in world.history if h[2] == "ramp-stall-guard"]
     assert ("demo.motor", 0.0, "ramp-stall-guard") in from_guard
     assert guard.stalls == 1

@@ -266,7 +266,7 @@ def test_load_tare() -> None:
 
 def test_tasks_are_divisors_of_100_hz() -> None:
     m, _, _ = build()
-    assert [(t.name, t.rate_hz) for t in m.tasks()] == [("ble.lift", 50.0)]
+    assert [(t.name, t.rate_hz) for t in m.tasks()] == [("lift", 50.0)]
 
 
 @pytest.mark.parametrize(("override", "key"), [
