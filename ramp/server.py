@@ -2,8 +2,9 @@
 
 One response line per request line, in order, per client. A client that stops reading is
 cut off once its unsent output passes a bound, so it can never block the loop or grow memory;
-a client that floods gets at most one read's worth of work per wake-up, so others keep their
-turn.
+a client that floods gets at most one small read's worth of work per wake-up, so the tick and
+the other clients keep their turn. A client that half-closes (sends FIN) is treated as gone for
+the watchdog and arbitration at once, but still receives every answer it is owed.
 """
 
 from __future__ import annotations
@@ -15,13 +16,17 @@ import socket
 from collections.abc import Callable
 
 from ramp.layers.robot import Client
-from ramp.mcp.messages import Response
+from ramp.mcp.messages import Response, error_response
 from ramp.mcp.protocol import LineSplitter, TooLong, format_responses
 from ramp.scheduler import Scheduler
 
 log = logging.getLogger("ramp.server")
 
-READ_CHUNK = 65536
+# Work per wake-up is proportional to bytes read (about 5 us per byte for a flood of bare
+# newlines or gets, measured): 64 KiB once held the loop for 300 ms, long enough for the stall
+# guard to stop every motor. 1 KiB bounds one client's turn to a few ms; the rest waits in the
+# kernel, and select reports the socket readable again on the next pass.
+READ_CHUNK = 1024
 
 
 class Connection(Client):
@@ -34,6 +39,9 @@ class Connection(Client):
         self.splitter = LineSplitter(max_line)
         self.out = bytearray()
         self.closed = False
+        #: The client sent FIN: nothing more to read, answers still to deliver.
+        self.input_ended = False
+        self.lost_reported = False
 
 
 Handler = Callable[[Connection, "bytes | TooLong"], list[Response]]
@@ -126,13 +134,40 @@ class McpServer:
             self._drop(conn, f"read error: {exc.strerror or exc}")
             return
         if not data:
-            self._drop(conn, "closed by client")
+            self._end_input(conn)
             return
         for msg in conn.splitter.feed(data):
-            responses = self.handler(conn, msg)
+            answer = self._answer(conn, msg)
             if conn.closed:
                 return
-            conn.out += format_responses(responses)
+            conn.out += answer
+        self._flush(conn)
+
+    def _answer(self, conn: Connection, msg: bytes | TooLong) -> bytes:
+        """The one response line `msg` is owed, whatever goes wrong while making it.
+
+        An exception here (a get property reading NaN, which MCP cannot carry) would otherwise
+        skip this message and the rest of the read, leaving the client's lines out of step.
+        """
+        try:
+            return format_responses(self.handler(conn, msg))
+        except Exception as exc:
+            log.exception("could not answer a message from %s", conn.peer)
+            return format_responses([error_response(
+                "robot", "mcp", "fault", f"internal error {type(exc).__name__}")])
+
+    def _end_input(self, conn: Connection) -> None:
+        """FIN from the client: it can command nothing more, but its answers are still owed.
+
+        Closing at once would throw away unsent output (`printf 'robot:robot.get=()\\n' | nc`
+        on a slow link); the socket closes when the output has drained.
+        """
+        conn.input_ended = True
+        self.scheduler.remove_reader(conn.fd)
+        if not conn.out:
+            self._drop(conn, "closed by client")
+            return
+        self._report_lost(conn)
         self._flush(conn)
 
     def _flush(self, conn: Connection) -> None:
@@ -152,6 +187,8 @@ class McpServer:
             return
         if conn.out:
             self.scheduler.add_writer(conn.fd, functools.partial(self._flush, conn))
+        elif conn.input_ended:
+            self._drop(conn, "closed by client")
         else:
             self.scheduler.remove_writer(conn.fd)
 
@@ -168,4 +205,10 @@ class McpServer:
             if exc.errno != errno.EBADF:
                 raise
         log.info("client %s disconnected: %s", conn.peer, why)
-        self.on_disconnect(conn)
+        self._report_lost(conn)
+
+    def _report_lost(self, conn: Connection) -> None:
+        """Tell the robot layer once that this client can no longer command or feed."""
+        if not conn.lost_reported:
+            conn.lost_reported = True
+            self.on_disconnect(conn)

@@ -38,7 +38,8 @@ class IntParam(Param):
         self.lo, self.hi = lo, hi
 
     def convert(self, token: str) -> int:
-        if len(token) > 20 or not _INT.match(token):
+        # Any decimal int, leading zeros too; the length bound only keeps int() cheap.
+        if len(token) > 64 or not _INT.match(token):
             raise BadParam(token)
         v = int(token)
         if not self.lo <= v <= self.hi:
