@@ -111,5 +111,7 @@ def test_sigkill_leaves_the_motors_stopped_by_the_controller_timeout(tmp_path: P
         proc.communicate(timeout=5)
         link.close()
     assert stopped_at is not None, "the emulated motors never stopped"
-    assert stopped_at - killed <= 0.5 + 0.1  # within the programmed 0.5 s timeout
+    # within the programmed 0.5 s timeout (counted from the last refresh, before the kill),
+    # plus scheduling slack for a busy test machine
+    assert stopped_at - killed <= 0.5 + 0.25
     assert emu.timed_out(128) and emu.timed_out(129)
