@@ -1,7 +1,7 @@
 """Injectable clocks: wall time on the robot, stepped time in tests and simulation.
 
-Control code never calls `time.time()` or `time.sleep()`; it receives `now` from the
-scheduler, which reads it from one of these.
+Control code never reads the wall clock or sleeps; it receives `now` from the scheduler,
+which reads it from one of these.
 """
 
 from __future__ import annotations

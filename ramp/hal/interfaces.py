@@ -18,6 +18,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
+from ramp.errors import ConfigError
 from ramp.schema import Field
 
 #: Channel kinds a bus may offer; YAML device entries name one through their module's schema.
@@ -129,6 +130,26 @@ class Bus(ABC):
         self.params = dict(params)
         self.is_open = False
         self.motors: list[MotorChannel] = []
+
+    def check_params(self, params: Mapping[str, Any]) -> dict[str, Any]:
+        """This driver's keys of `params`, checked against `fields`, defaults filled in.
+
+        The config loader has already checked them; this keeps a bus built directly (tests,
+        tools) from accepting a bad value. Keys of other drivers are ignored, since the sim
+        driver stands in for any of them. Raises ConfigError naming `buses.NAME.KEY`.
+        """
+        out: dict[str, Any] = {}
+        for key, f in self.fields.items():
+            try:
+                if key in params:
+                    out[key] = f.check(params[key])
+                elif f.required:
+                    raise ValueError(f"missing; expected {f.expected()}")
+                else:
+                    out[key] = f.default
+            except ValueError as exc:
+                raise ConfigError(str(exc), key=f"buses.{self.name}.{key}") from None
+        return out
 
     # -- channels -----------------------------------------------------------------------------
     def channel(self, kind: str, label: str, spec: Mapping[str, Any]) -> Any:

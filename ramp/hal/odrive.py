@@ -29,10 +29,10 @@ from typing import Any, ClassVar
 
 import can
 
-from ramp.errors import ConfigError, DeviceError
+from ramp.errors import DeviceError
 from ramp.hal import odrive_codec as oc
 from ramp.hal.interfaces import Bus, MotorChannel
-from ramp.schema import REQUIRED, Field
+from ramp.schema import Field
 
 #: Most frames one drain reads, so a babbling bus cannot hold the tick (64 axes x 110 frames/s
 #: at a 100 Hz tick is about 70 frames per tick).
@@ -99,15 +99,7 @@ class ODriveBus(Bus):
 
     def __init__(self, name: str, params: Mapping[str, Any]) -> None:
         super().__init__(name, params)
-        cfg: dict[str, Any] = {}
-        for key, f in self.fields.items():
-            value = self.params.get(key, f.default)
-            if value is REQUIRED:
-                raise ConfigError(f"missing; expected {f.expected()}", key=f"buses.{name}.{key}")
-            try:
-                cfg[key] = f.check(value)
-            except ValueError as exc:
-                raise ConfigError(str(exc), key=f"buses.{name}.{key}") from None
+        cfg = self.check_params(params)
         self.interface: str = cfg["interface"]
         self.can_channel: str = cfg["channel"]
         self.bitrate: int = cfg["bitrate"]

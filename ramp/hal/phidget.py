@@ -23,7 +23,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from ramp.errors import ConfigError, DeviceError
+from ramp.errors import DeviceError
 from ramp.hal.interfaces import AnalogInput, BridgeInput, Bus, DigitalInput, DigitalOutput
 from ramp.schema import Field
 
@@ -188,12 +188,7 @@ class PhidgetBus(Bus):
         self, name: str, params: Mapping[str, Any], api: PhidgetApi | None = None
     ) -> None:
         super().__init__(name, params)
-        cfg: dict[str, Any] = {}
-        for key, f in self.fields.items():
-            try:
-                cfg[key] = f.check(params[key]) if key in params else f.default
-            except ValueError as exc:
-                raise ConfigError(str(exc), key=f"buses.{name}.{key}") from None
+        cfg = self.check_params(params)
         self.serial: int = cfg["serial"]
         self.hub_port: int = cfg["hub_port"]
         self.label: str = cfg["label"]

@@ -47,7 +47,7 @@ import serial
 from ramp.errors import ConfigError, DeviceError
 from ramp.hal import sabertooth_codec as codec
 from ramp.hal.interfaces import Bus, MotorChannel
-from ramp.schema import Field, FieldError, apply_fields
+from ramp.schema import Field
 
 #: Largest burst, in bytes, the pacer writes back to back (8 packets).
 BURST_BYTES: Final = 32
@@ -101,11 +101,7 @@ class SabertoothBus(Bus):
 
     def __init__(self, name: str, params: Mapping[str, Any]) -> None:
         super().__init__(name, params)
-        own = {k: v for k, v in params.items() if k in self.fields}
-        try:
-            cfg = apply_fields(self.fields, own)
-        except FieldError as exc:
-            raise ConfigError(exc.message, key=f"buses.{name}.{exc.key}") from None
+        cfg = self.check_params(params)
         self.port: str = cfg["port"]
         self.baud: int = cfg["baud"]
         self.timeout_s: float = cfg["timeout"]
