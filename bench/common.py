@@ -328,6 +328,11 @@ def ask(sock: socket.socket, text: str | bytes) -> bytes:
     """One message, one response line (blocking; client side only)."""
     data = text.encode() if isinstance(text, str) else text
     sock.sendall(data + b"\n")
+    return recv_line(sock)
+
+
+def recv_line(sock: socket.socket) -> bytes:
+    """Read until the response line's newline (assumes one line in flight)."""
     buf = b""
     while not buf.endswith(b"\n"):
         chunk = sock.recv(65536)

@@ -24,6 +24,7 @@ from bench.common import (
     compare,
     connect,
     progress,
+    recv_line,
     start_supervisor,
     summary,
     versus,
@@ -34,27 +35,17 @@ from bench.tick import window
 REQUEST = b"base:base.get=()\n"
 
 
-def _recv_line(sock: socket.socket) -> bytes:
-    buf = b""
-    while not buf.endswith(b"\n"):
-        chunk = sock.recv(65536)
-        if not chunk:
-            raise ConnectionError("server closed the connection")
-        buf += chunk
-    return buf
-
-
 def sequential(port: int, requests: int, warmup: int) -> list[float]:
     """Round trips in µs of `requests` requests, each sent after the previous answer."""
     with connect(port) as sock:
         for _ in range(warmup):
             sock.sendall(REQUEST)
-            _recv_line(sock)
+            recv_line(sock)
         out: list[float] = []
         for _ in range(requests):
             t0 = time.perf_counter()
             sock.sendall(REQUEST)
-            _recv_line(sock)
+            recv_line(sock)
             out.append((time.perf_counter() - t0) * 1e6)
     return out
 
@@ -67,7 +58,7 @@ def _open_clients(port: int, count: int) -> list[socket.socket]:
         while len(socks) < count:
             sock = connect(port)
             sock.sendall(REQUEST)
-            line = _recv_line(sock)
+            line = recv_line(sock)
             if b"error=(busy" in line:  # the previous phase's clients are still closing
                 sock.close()
                 if time.monotonic() > deadline:
@@ -143,7 +134,7 @@ def run(settings: Settings, workdir: Path) -> dict[str, Any]:
     try:
         with connect(port) as sock:
             sock.sendall(REQUEST)
-            response_bytes = len(_recv_line(sock))
+            response_bytes = len(recv_line(sock))
         ramp = measure(port, settings, "supervisor")
         child.terminate()
     finally:
