@@ -176,6 +176,17 @@ class SimHarness(Harness):
         self.backplane.close()
 
 
+def ask_line(sock: socket.socket, text: str) -> str:
+    """Send one message on a blocking socket and read its response line."""
+    sock.sendall(text.encode() + b"\n")
+    buf = b""
+    while not buf.endswith(b"\n"):
+        chunk = sock.recv(65536)
+        assert chunk, "server closed"
+        buf += chunk
+    return buf.decode().rstrip("\n")
+
+
 def start_ramp(args: list[str], env: dict[str, str] | None = None,
                stderr: int = subprocess.PIPE) -> tuple[subprocess.Popen[str], str, int]:
     """`ramp run ARGS` as a process, once it printed its ready line: (process, host, port).

@@ -192,8 +192,7 @@ class RobotDistribution:
             if self.any_moving():
                 self.watchdog.arm(client, now)
             else:
-                self.watchdog.state = "idle"
-                self.watchdog.feeder = None
+                self.watchdog.reset()
         elif fn.kind == "stop" and not self.any_moving():
             self.watchdog.disarm()
 

@@ -32,6 +32,12 @@ class Watchdog:
             self.state = "idle"
         self.feeder = None
 
+    def reset(self) -> None:
+        """An accepted motion request left nothing moving: idle, whatever it was (a trip is
+        over once a new motion request is accepted)."""
+        self.state = "idle"
+        self.feeder = None
+
     def feed(self, client: object, now: float) -> None:
         if self.state == "armed" and client is self.feeder:
             self.last_feed = now

@@ -12,17 +12,8 @@ from pathlib import Path
 import pytest
 
 from tests.harness import REPO
+from tests.harness import ask_line as ask
 from tests.harness import start_ramp as start
-
-
-def ask(sock: socket.socket, text: str) -> str:
-    sock.sendall(text.encode() + b"\n")
-    buf = b""
-    while not buf.endswith(b"\n"):
-        chunk = sock.recv(65536)
-        assert chunk, "server closed"
-        buf += chunk
-    return buf.decode().rstrip("\n")
 
 
 def test_run_sim_serves_and_sigterm_stops_motors_and_exits_0() -> None:

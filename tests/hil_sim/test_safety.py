@@ -18,7 +18,8 @@ from ramp.hal.simio import SimBus
 from ramp.stall_guard import StallGuard
 from ramp.supervisor import Supervisor
 from tests.harness import DEMO_YAML, MARTE_YAML, FakeWorld, config_from
-from tests.hil_sim.test_ramp_run import ask, start
+from tests.harness import ask_line as ask
+from tests.harness import start_ramp as start
 
 
 class RecordingWorld(FakeWorld):

@@ -22,7 +22,7 @@ from pathlib import Path
 import pexpect
 import pytest
 
-from tests.harness import start_ramp
+from tests.harness import ask_line, start_ramp
 
 REPO = Path(__file__).resolve().parents[2]
 _SCRIPT = Path(sys.executable).parent / "ramp-shell"
@@ -106,13 +106,7 @@ def expect_exact(child: pexpect.spawn, text: str) -> None:
 def ask(address: str, text: str) -> str:
     host, port = address.split(":")
     with socket.create_connection((host, int(port)), timeout=5) as s:
-        s.sendall(text.encode() + b"\n")
-        buf = b""
-        while not buf.endswith(b"\n"):
-            chunk = s.recv(65536)
-            assert chunk, "server closed"
-            buf += chunk
-    return buf.decode().rstrip("\n")
+        return ask_line(s, text)
 
 
 def heading(name: str) -> str:
