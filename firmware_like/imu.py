@@ -1,0 +1,403 @@
+"""A PhidgetSpatial 3/3/3 strapped to the chassis: what its SpatialData events would say.
+
+USB cannot be emulated, so this is a HAL-level emulator (SPEC 6.2): the `sim` IMU driver polls
+it, where the `phidget` driver would drain libphidget22's events. It reads the chassis' true
+motion from `truth()` and produces, every data interval on the injected clock, what the board
+would measure there:
+
+- **Truth contract.** `truth()` returns an object with `roll`, `pitch`, `yaw` (rad, ZYX Euler,
+  SPEC 6.1's frame: x forward, y left, z up, yaw counter-clockwise), `omega_body` (rad/s,
+  3 numbers, chassis axes) and `accel_body` (m/s^2, 3 numbers, chassis axes, the chassis
+  origin's acceleration WITHOUT gravity). The arena world exposes it as `world.imu_truth()`.
+  Between two polls the truth is interpolated linearly, so samples at 8 ms stay smooth when
+  the world is stepped at 10 ms.
+- **Physics.** Specific force at the board = acceleration of its mounting point (lever arm:
+  alpha x r + omega x (omega x r)) minus gravity; both it and the rate are turned into the
+  board's axes by its mount rotation (`autonomy.yaml` `imu.mount`).
+- **The board's conventions.** Acceleration in g with Phidget22's sign (minus the specific
+  force: (0, 0, -1) g lying level at rest), angular rate in deg/s, magnetic field in gauss,
+  timestamp in ms restarting at every attach.
+- **Errors.** White noise on every axis, a constant bias per seed, saturation at the board's
+  ranges. Numbers from the PhidgetSpatial Precision 3/3/3 (1044) data sheet where it gives
+  them, else ASSUMPTION (see `ImuModel`).
+- **Faults (SPEC 6.2, chosen by name, seeded):** `gyro-drift`, a gyro bias that wanders away
+  from its start-up value (several deg/min when integrated alone: what drifted MARTE's AHRS in
+  run 1); `imu-shift`, the mount rotating 4-8 deg about a horizontal axis at a moment chosen
+  from the seed (what tilted MARTE's LIDAR in run 4). `fault_info()` says what was chosen.
+
+Deterministic: the same seed, clock steps and truth give the same samples, however the
+polls fall (noise is drawn per sample from its own stream).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, NamedTuple, Protocol
+
+import numpy as np
+
+GRAVITY_MPS2 = 9.80665
+#: Phidget22 reports acceleration as minus the specific force (ROS's phidgets_spatial negates
+#: it to get REP 145's +1 g up).
+PHIDGET_ACCEL_SIGN = -1.0
+
+FAULTS = ("none", "gyro-drift", "imu-shift")
+
+Vec3 = tuple[float, float, float]
+Mat3 = tuple[Vec3, Vec3, Vec3]
+
+
+class Clock(Protocol):
+    """Anything with `now() -> float` (ramp.clock.VirtualClock, MonotonicClock)."""
+
+    def now(self) -> float: ...
+
+
+@dataclass(frozen=True)
+class ImuTruth:
+    """A ready-made truth value (tests, simple worlds); any object with these fields works."""
+
+    roll: float = 0.0
+    pitch: float = 0.0
+    yaw: float = 0.0
+    omega_body: Vec3 = (0.0, 0.0, 0.0)
+    accel_body: Vec3 = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class ImuModel:
+    """The board's error model and ranges."""
+
+    accel_noise_g: float = 0.00028  # 1044 data sheet: accelerometer white noise sigma 280 ug
+    gyro_noise_dps: float = 0.095  # 1044 data sheet: gyroscope white noise sigma 0.095 deg/s
+    mag_noise_gauss: float = 0.0011  # ASSUMPTION: 1.1 mG (phidgets_drivers' default stdev)
+    accel_bias_g: float = 0.002  # ASSUMPTION: sigma of the constant bias per board (seed)
+    gyro_bias_dps: float = 0.05  # ASSUMPTION: sigma of the constant bias left after factory cal
+    accel_range_g: float = 8.0  # 1042 (3/3/3): +-8 g
+    gyro_range_dps: float = 2000.0  # 1042 (3/3/3): +-2000 deg/s
+    #: ASSUMPTION: Earth's field in the arena frame, gauss (Florida: ~0.24 G horizontal, ~0.41
+    #: G down; the arena's +x taken as magnetic north). None: a board without a compass.
+    earth_field_gauss: Vec3 | None = (0.24, 0.0, -0.41)
+    # gyro-drift: each axis' bias leaves its start-up value for a mean drawn in
+    # [drift_min_dps, drift_max_dps] (random sign) with time constant drift_tau_s, wandering
+    # around it by drift_wander_dps (ASSUMPTION: tuned so that the rate integrates to several
+    # degrees per minute, as in MARTE's run 1).
+    drift_min_dps: float = 0.08
+    drift_max_dps: float = 0.15
+    drift_tau_s: float = 30.0
+    drift_wander_dps: float = 0.02
+    # imu-shift: the angle range of SPEC 6.2 and how long the mount takes to move
+    shift_min_deg: float = 4.0
+    shift_max_deg: float = 8.0
+    shift_duration_s: float = 0.2  # ASSUMPTION: a damper giving way is quick, not instant
+    zero_gyro_s: float = 2.0  # Phidget22 zeroGyro: "re-zeros the gyroscope in 1-2 seconds"
+
+
+class SpatialData(NamedTuple):
+    """One SpatialData event, as Phidget22 hands it to the handler, plus the clock time."""
+
+    t: float  # s on the emulator's clock when it was measured
+    timestamp_ms: float
+    acceleration: Vec3  # g, Phidget22 sign
+    angular_rate: Vec3  # deg/s
+    magnetic_field: Vec3 | None  # gauss
+
+
+class _Snap(NamedTuple):
+    t: float
+    roll: float
+    pitch: float
+    yaw: float
+    omega: Vec3
+    accel: Vec3
+
+
+class ImuEmulator:
+    """The board; `poll()` returns the samples measured since the last poll."""
+
+    NOISE_PER_SAMPLE = 12  # accel 3, gyro 3, compass 3, drift wander 3
+    MIN_INTERVAL_MS = 1
+    MAX_INTERVAL_MS = 1000
+
+    def __init__(self, clock: Clock, truth: Callable[[], Any], *, seed: int = 0,
+                 fault: str | None = None, data_interval_ms: int = 8, mount: Any = None,
+                 model: ImuModel | None = None,
+                 shift_window_s: tuple[float, float] = (60.0, 480.0)) -> None:
+        fault = fault or "none"
+        if fault not in FAULTS:
+            raise ValueError(f"unknown IMU fault {fault!r} (expected one of: {', '.join(FAULTS)})")
+        self.clock = clock
+        self.truth = truth
+        self.seed = seed
+        self.fault = fault
+        self.model = model or ImuModel()
+        self.started_at = float(clock.now())
+        self._interval_ms = self._check_interval(data_interval_ms)
+        m = mount
+        self.lever: Vec3 = (float(getattr(m, "x", 0.0)), float(getattr(m, "y", 0.0)),
+                            float(getattr(m, "z", 0.0)))
+        self.mount_rotation: Mat3 = _rot_zyx(math.radians(getattr(m, "roll", 0.0)),
+                                             math.radians(getattr(m, "pitch", 0.0)),
+                                             math.radians(getattr(m, "yaw", 0.0)))
+        params_seq, noise_seq = np.random.SeedSequence(seed).spawn(2)
+        prng = np.random.default_rng(params_seq)
+        md = self.model
+        self.accel_bias_g: Vec3 = _vec(prng.normal(0.0, md.accel_bias_g, 3))
+        self.gyro_bias_dps: Vec3 = _vec(prng.normal(0.0, md.gyro_bias_dps, 3))
+        # Fault parameters are drawn whatever the fault, so a seed means the same board.
+        signs = prng.choice((-1.0, 1.0), 3)
+        mags = prng.uniform(md.drift_min_dps, md.drift_max_dps, 3)
+        self.drift_mean_dps: Vec3 = _vec(signs * mags)
+        lo, hi = shift_window_s
+        if not 0.0 <= lo <= hi:
+            raise ValueError(f"shift window {shift_window_s} must be 0 <= start <= end")
+        self.shift_at_s = self.started_at + float(prng.uniform(lo, hi))
+        self.shift_deg = float(prng.uniform(md.shift_min_deg, md.shift_max_deg))
+        azimuth = float(prng.uniform(0.0, 2.0 * math.pi))
+        self.shift_axis: Vec3 = (math.cos(azimuth), math.sin(azimuth), 0.0)
+        self._noise_rng = np.random.default_rng(noise_seq)
+        self._noise = np.empty(0)
+        self._noise_at = 0
+        self._drift: list[float] = [0.0, 0.0, 0.0]
+        self._gyro_correction: list[float] = [0.0, 0.0, 0.0]
+        self._zeroing: tuple[float, list[float], int] | None = None  # (until, sum, count)
+        self.attached = True
+        # The sample grid: sample k of the grid is measured at grid_t + k * interval and
+        # stamped grid_ms + k * interval_ms (the board's timestamp restarts at each attach).
+        self._grid_t = self.started_at
+        self._grid_ms = 0.0
+        self._k = 0
+        self._prev: _Snap | None = None
+        self.samples = 0
+
+    # -- what the driver can do to the board -------------------------------------------------
+    def set_data_interval(self, ms: int) -> None:
+        """Phidget22 `setDataInterval`: the next sample comes one new interval after the last."""
+        ms = self._check_interval(ms)
+        self._grid_t += self._k * self._interval_ms / 1000.0
+        self._grid_ms += self._k * self._interval_ms
+        self._k = 0
+        self._interval_ms = ms
+
+    def zero_gyro(self) -> None:
+        """Phidget22 `zeroGyro`: average the rate for ~2 s and take it as the new zero."""
+        self._zeroing = (float(self.clock.now()) + self.model.zero_gyro_s, [0.0, 0.0, 0.0], 0)
+
+    def unplug(self) -> None:
+        """The USB cable comes out: no more samples."""
+        self.attached = False
+
+    def plug(self) -> None:
+        """The cable goes back in: the board restarts its timestamp and its default interval
+        is whatever the driver sets again."""
+        if self.attached:
+            return
+        self.attached = True
+        self._grid_t = float(self.clock.now())
+        self._grid_ms = 0.0
+        self._k = 0
+        self._prev = None
+
+    # -- what the fault did ------------------------------------------------------------------
+    def shift_fraction(self, t: float) -> float:
+        """How far the imu-shift has gone at clock time t: 0 before, 1 after."""
+        if self.fault != "imu-shift" or t <= self.shift_at_s:
+            return 0.0
+        return min(1.0, (t - self.shift_at_s) / self.model.shift_duration_s)
+
+    def fault_info(self) -> dict[str, Any]:
+        """What the seed chose, for tests and the trace header."""
+        info: dict[str, Any] = {"fault": self.fault, "seed": self.seed}
+        if self.fault == "imu-shift":
+            info.update(at_s=round(self.shift_at_s - self.started_at, 3),
+                        deg=round(self.shift_deg, 3),
+                        axis=[round(a, 4) for a in self.shift_axis])
+        elif self.fault == "gyro-drift":
+            info.update(drift_dps=[round(d, 4) for d in self.drift_mean_dps],
+                        tau_s=self.model.drift_tau_s)
+        return info
+
+    # -- sampling ----------------------------------------------------------------------------
+    @property
+    def data_interval_ms(self) -> int:
+        return self._interval_ms
+
+    def poll(self) -> list[SpatialData]:
+        """Every sample whose time has come since the last poll, oldest first."""
+        now = float(self.clock.now())
+        if not self.attached:
+            return []
+        snap = self._snapshot(now)
+        prev = self._prev if self._prev is not None and self._prev.t < now else None
+        out: list[SpatialData] = []
+        step_s = self._interval_ms / 1000.0
+        while True:
+            ts = self._grid_t + (self._k + 1) * step_s
+            if ts > now + 1e-9:
+                break
+            self._k += 1
+            ms = self._grid_ms + self._k * self._interval_ms
+            out.append(self._measure(ts, ms, prev, snap))
+        if prev is None or snap.t > prev.t:
+            self._prev = snap
+        return out
+
+    def _check_interval(self, ms: int) -> int:
+        if isinstance(ms, bool) or not isinstance(ms, int) \
+                or not self.MIN_INTERVAL_MS <= ms <= self.MAX_INTERVAL_MS:
+            raise ValueError(f"data interval {ms!r} ms is outside "
+                             f"{self.MIN_INTERVAL_MS}-{self.MAX_INTERVAL_MS}")
+        return ms
+
+    def _snapshot(self, now: float) -> _Snap:
+        tr = self.truth()
+        return _Snap(now, float(tr.roll), float(tr.pitch), float(tr.yaw),
+                     _vec(tr.omega_body), _vec(tr.accel_body))
+
+    def _measure(self, ts: float, ms: float, prev: _Snap | None, cur: _Snap) -> SpatialData:
+        md = self.model
+        # Chassis motion at ts, interpolated between the last two truths.
+        if prev is None:
+            roll, pitch, yaw, omega, accel = cur.roll, cur.pitch, cur.yaw, cur.omega, cur.accel
+            alpha: Vec3 = (0.0, 0.0, 0.0)
+        else:
+            span = cur.t - prev.t
+            f = min(1.0, max(0.0, (ts - prev.t) / span))
+            roll = prev.roll + f * _wrap(cur.roll - prev.roll)
+            pitch = prev.pitch + f * _wrap(cur.pitch - prev.pitch)
+            yaw = prev.yaw + f * _wrap(cur.yaw - prev.yaw)
+            omega = _lerp(prev.omega, cur.omega, f)
+            accel = _lerp(prev.accel, cur.accel, f)
+            alpha = _scale(_sub(cur.omega, prev.omega), 1.0 / span)
+        # Specific force at the mounting point, chassis axes: a + alpha x r + w x (w x r) - g.
+        r = self.lever
+        a_point = _add(accel, _add(_cross(alpha, r), _cross(omega, _cross(omega, r))))
+        sr, cr = math.sin(roll), math.cos(roll)
+        sp, cp = math.sin(pitch), math.cos(pitch)
+        up_in_chassis = (-sp, sr * cp, cr * cp)  # world +z seen from the chassis (ZYX)
+        force = _add(a_point, _scale(up_in_chassis, GRAVITY_MPS2))
+        # The board's axes: mount rotation, turned further by an imu-shift once it happens.
+        rot = self.mount_rotation
+        rate = omega
+        frac = self.shift_fraction(ts)
+        if frac > 0.0:
+            theta = math.radians(self.shift_deg)
+            rot = _mat_mul(_axis_angle(self.shift_axis, theta * frac), rot)
+            if frac < 1.0:  # the board is turning on its mount: the gyro feels it
+                rate = _add(rate, _scale(self.shift_axis, theta / md.shift_duration_s))
+        force_s = _mat_t_vec(rot, force)
+        rate_s = _mat_t_vec(rot, rate)
+        n = self._draw()
+        if self.fault == "gyro-drift":
+            self._advance_drift(n[9:12])
+        accel_g = tuple(
+            _clip(PHIDGET_ACCEL_SIGN * force_s[i] / GRAVITY_MPS2 + self.accel_bias_g[i]
+                  + md.accel_noise_g * n[i], md.accel_range_g)
+            for i in range(3))
+        raw_gyro = [math.degrees(rate_s[i]) + self.gyro_bias_dps[i] + self._drift[i]
+                    + md.gyro_noise_dps * n[3 + i] for i in range(3)]
+        self._zero_step(ts, raw_gyro)
+        gyro = tuple(_clip(raw_gyro[i] - self._gyro_correction[i], md.gyro_range_dps)
+                     for i in range(3))
+        mag: Vec3 | None = None
+        if md.earth_field_gauss is not None:
+            world_to_chassis = _rot_zyx(roll, pitch, yaw)
+            field_c = _mat_t_vec(world_to_chassis, md.earth_field_gauss)
+            field_s = _mat_t_vec(rot, field_c)
+            mag = _vec([field_s[i] + md.mag_noise_gauss * n[6 + i] for i in range(3)])
+        self.samples += 1
+        return SpatialData(ts, ms, _vec(accel_g), _vec(gyro), mag)
+
+    def _advance_drift(self, w: Any) -> None:
+        """One step of a first-order Gauss-Markov bias pulled toward `drift_mean_dps`."""
+        md = self.model
+        phi = math.exp(-self._interval_ms / 1000.0 / md.drift_tau_s)
+        sigma = md.drift_wander_dps * math.sqrt(1.0 - phi * phi)
+        for i in range(3):
+            mean = self.drift_mean_dps[i]
+            self._drift[i] = mean + (self._drift[i] - mean) * phi + sigma * float(w[i])
+
+    def _zero_step(self, ts: float, raw_gyro: list[float]) -> None:
+        if self._zeroing is None:
+            return
+        until, total, count = self._zeroing
+        if ts <= until:
+            self._zeroing = (until, [total[i] + raw_gyro[i] for i in range(3)], count + 1)
+            return
+        if count:
+            self._gyro_correction = [total[i] / count for i in range(3)]
+        self._zeroing = None
+
+    def _draw(self) -> Any:
+        if self._noise_at + self.NOISE_PER_SAMPLE > len(self._noise):
+            self._noise = self._noise_rng.standard_normal(self.NOISE_PER_SAMPLE * 512)
+            self._noise_at = 0
+        n = self._noise[self._noise_at:self._noise_at + self.NOISE_PER_SAMPLE]
+        self._noise_at += self.NOISE_PER_SAMPLE
+        return n
+
+
+# -- small vector helpers (plain floats: a few per sample, faster than numpy at this size) ----
+def _vec(v: Any) -> Vec3:
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
+def _add(a: Vec3, b: Vec3) -> Vec3:
+    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
+
+
+def _sub(a: Vec3, b: Vec3) -> Vec3:
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+def _scale(a: Vec3, k: float) -> Vec3:
+    return (a[0] * k, a[1] * k, a[2] * k)
+
+
+def _lerp(a: Vec3, b: Vec3, f: float) -> Vec3:
+    return (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]))
+
+
+def _cross(a: Vec3, b: Vec3) -> Vec3:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _wrap(angle: float) -> float:
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _clip(x: float, limit: float) -> float:
+    return max(-limit, min(limit, x))
+
+
+def _rot_zyx(roll: float, pitch: float, yaw: float) -> Mat3:
+    """Rz(yaw) Ry(pitch) Rx(roll): body axes -> parent axes."""
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return ((cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr),
+            (sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr),
+            (-sp, cp * sr, cp * cr))
+
+
+def _axis_angle(axis: Vec3, angle: float) -> Mat3:
+    x, y, z = axis
+    c, s = math.cos(angle), math.sin(angle)
+    t = 1.0 - c
+    return ((t * x * x + c, t * x * y - s * z, t * x * z + s * y),
+            (t * x * y + s * z, t * y * y + c, t * y * z - s * x),
+            (t * x * z - s * y, t * y * z + s * x, t * z * z + c))
+
+
+def _mat_mul(a: Mat3, b: Mat3) -> Mat3:
+    return tuple(  # type: ignore[return-value]
+        tuple(sum(a[i][k] * b[k][j] for k in range(3)) for j in range(3)) for i in range(3))
+
+
+def _mat_t_vec(a: Mat3, v: Vec3) -> Vec3:
+    """a transposed times v: a parent-frame vector seen in the body frame."""
+    return (a[0][0] * v[0] + a[1][0] * v[1] + a[2][0] * v[2],
+            a[0][1] * v[0] + a[1][1] * v[1] + a[2][1] * v[2],
+            a[0][2] * v[0] + a[1][2] * v[1] + a[2][2] * v[2])

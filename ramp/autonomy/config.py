@@ -1,0 +1,387 @@
+"""`autonomy.yaml` -> validated, frozen configuration of the autonomy and its own hardware.
+
+The autonomy's file, not the backend's: the backend's address, the LIDAR's address and
+mount, the IMU board and mount, the pan/tilt servo board and its two axes, and the mission's
+tunable numbers. Like `ramp.yaml`'s loader, every error names the file, the line, the key path
+and what was expected (`autonomy.yaml:14: gimbal.tilt.max_deg: 200.0 is not an angle in
+degrees (-180-180)`), and all of them are collected in one pass so `ramp-autonomy check`
+shows everything to fix at once.
+
+Blocks are field tables (`ramp.schema.Field`): a later feature adds a key by adding one entry
+(`MISSION_FIELDS` is meant to grow with the mission). Nothing here touches hardware.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+from ramp.autonomy.hal import DRIVERS
+from ramp.autonomy.mount import Mount
+from ramp.errors import ConfigError, ConfigErrors
+from ramp.schema import Field
+from ramp.yamlmarks import MarkedMap, YamlSyntaxError, kind_of, load_marked
+
+DEFAULT_BACKEND = ("127.0.0.1", 5577)
+DEFAULT_LIDAR_HOST = "192.168.0.10"  # the UTM-30LX-EW's factory address (SPEC 6.2)
+DEFAULT_LIDAR_PORT = 10940
+
+#: Pulse widths an RC servo accepts safely; Hitec's digital servos run about 550-2450 us.
+PULSE_MIN_US = 500.0
+PULSE_MAX_US = 2500.0
+
+MOUNT_FIELDS = {
+    "x": Field(float, 0.0, lo=-5.0, hi=5.0, what="metres in the chassis frame"),
+    "y": Field(float, 0.0, lo=-5.0, hi=5.0, what="metres in the chassis frame"),
+    "z": Field(float, 0.0, lo=-5.0, hi=5.0, what="metres in the chassis frame"),
+    "roll": Field(float, 0.0, lo=-180.0, hi=180.0, what="degrees"),
+    "pitch": Field(float, 0.0, lo=-90.0, hi=90.0, what="degrees"),
+    "yaw": Field(float, 0.0, lo=-180.0, hi=180.0, what="degrees"),
+}
+PIVOT_FIELDS = {k: MOUNT_FIELDS[k] for k in ("x", "y", "z")}
+
+LIDAR_FIELDS = {
+    "host": Field(str, DEFAULT_LIDAR_HOST, what="a host name or IP address"),
+    "port": Field(int, DEFAULT_LIDAR_PORT, lo=1, hi=65535, what="a TCP port"),
+}
+
+_SERIAL = Field(int, -1, lo=-1, what="a Phidget serial number or -1 for any")
+_HUB_PORT = Field(int, -1, lo=-1, hi=5, what="a VINT hub port or -1 for any")
+_ATTACH = Field(float, 2.0, lo=0.05, hi=60.0, what="a time in s")
+
+IMU_FIELDS = {
+    "driver": Field(str, "phidget", choices=tuple(DRIVERS["imu"]), what="an IMU driver"),
+    "serial": _SERIAL,
+    "hub_port": _HUB_PORT,
+    "channel": Field(int, 0, lo=0, hi=7, what="a Spatial channel"),
+    "data_interval_ms": Field(int, 8, lo=1, hi=1000, what="a sample interval in ms"),
+    "attach_timeout_s": _ATTACH,
+}
+
+GIMBAL_FIELDS = {
+    "driver": Field(str, "phidget", choices=tuple(DRIVERS["gimbal"]), what="a gimbal driver"),
+    "serial": _SERIAL,
+    "hub_port": _HUB_PORT,
+    "attach_timeout_s": _ATTACH,
+}
+
+SERVO_FIELDS = {
+    "channel": Field(int, lo=0, hi=15, what="a servo channel"),
+    "min_deg": Field(float, lo=-180.0, hi=180.0, what="an angle in degrees"),
+    "max_deg": Field(float, lo=-180.0, hi=180.0, what="an angle in degrees"),
+    "velocity_dps": Field(float, 90.0, lo=1.0, hi=2000.0, what="a speed in deg/s"),
+    "acceleration_dps2": Field(float, 720.0, lo=1.0, hi=100000.0,
+                               what="an acceleration in deg/s^2"),
+    "neutral_us": Field(float, 1500.0, lo=PULSE_MIN_US, hi=PULSE_MAX_US,
+                        what="a pulse width in us"),
+    "us_per_deg": Field(float, 10.0, lo=1.0, hi=50.0, what="microseconds per degree"),
+    "reversed": Field(bool, False),
+}
+
+#: The mission's tunables (SPEC 6.3). Any named number is accepted in `mission:`; the names
+#: listed here are also range-checked and get their default when absent.
+MISSION_FIELDS: dict[str, Field] = {
+    "duration_s": Field(float, 600.0, lo=1.0, hi=86400.0, what="a run length in s"),
+    "end_margin_s": Field(float, 30.0, lo=0.0, hi=3600.0,
+                          what="seconds before the end when no new cycle starts"),
+    "max_relocalize_tries": Field(int, 3, lo=0, hi=100, what="a number of tries"),
+}
+
+TOP_KEYS = ("backend", "lidar", "imu", "gimbal", "mission")
+
+
+@dataclass(frozen=True)
+class LidarConfig:
+    host: str = DEFAULT_LIDAR_HOST
+    port: int = DEFAULT_LIDAR_PORT
+    mount: Mount = Mount()  # optical centre with the gimbal at pan = tilt = 0
+
+
+@dataclass(frozen=True)
+class ImuConfig:
+    driver: str = "phidget"
+    serial: int = -1
+    hub_port: int = -1
+    channel: int = 0
+    data_interval_ms: int = 8
+    attach_timeout_s: float = 2.0
+    mount: Mount = Mount()  # the board's axes on the chassis
+
+
+@dataclass(frozen=True)
+class ServoConfig:
+    """One axis of the gimbal. Angles are the gimbal's, 0 = straight ahead / level."""
+
+    name: str
+    channel: int
+    min_deg: float
+    max_deg: float
+    velocity_dps: float = 90.0
+    acceleration_dps2: float = 720.0
+    neutral_us: float = 1500.0  # pulse width at 0 deg
+    us_per_deg: float = 10.0
+    reversed: bool = False  # a larger pulse turns the axis the negative way
+
+    def pulse_us(self, deg: float) -> float:
+        """The pulse width that puts this axis at `deg`."""
+        sign = -1.0 if self.reversed else 1.0
+        return self.neutral_us + sign * self.us_per_deg * deg
+
+
+@dataclass(frozen=True)
+class GimbalConfig:
+    driver: str = "phidget"
+    serial: int = -1
+    hub_port: int = -1
+    attach_timeout_s: float = 2.0
+    pivot: tuple[float, float, float] = (0.0, 0.0, 0.0)  # where pan and tilt axes cross
+    pan: ServoConfig = ServoConfig("pan", 0, -90.0, 90.0)
+    tilt: ServoConfig = ServoConfig("tilt", 1, -30.0, 45.0)
+
+
+@dataclass(frozen=True)
+class AutonomyConfig:
+    file: str = ""
+    backend_host: str = DEFAULT_BACKEND[0]
+    backend_port: int = DEFAULT_BACKEND[1]
+    lidar: LidarConfig = LidarConfig()
+    imu: ImuConfig = ImuConfig()
+    gimbal: GimbalConfig = GimbalConfig()
+    mission: Mapping[str, float] = field(default_factory=lambda: MappingProxyType(
+        {k: f.default for k, f in MISSION_FIELDS.items()}))
+
+    @property
+    def backend(self) -> str:
+        host = f"[{self.backend_host}]" if ":" in self.backend_host else self.backend_host
+        return f"{host}:{self.backend_port}"
+
+
+def parse_address(text: str) -> tuple[str, int]:
+    """`HOST:PORT` (or `[v6]:PORT`) -> (host, port); ValueError says what was expected."""
+    what = "expected HOST:PORT (for example 192.168.1.10:5577)"
+    if not isinstance(text, str) or ":" not in text:
+        raise ValueError(f"{text!r} is not an address; {what}")
+    host, _, port_text = text.rpartition(":")
+    if host.startswith("[") and host.endswith("]"):
+        host = host[1:-1]
+    if not host or " " in host:
+        raise ValueError(f"{text!r} has no host; {what}")
+    try:
+        port = int(port_text)
+    except ValueError:
+        raise ValueError(f"{text!r} has no port number; {what}") from None
+    if not 1 <= port <= 65535:
+        raise ValueError(f"{text!r}: port {port} is outside 1-65535")
+    return host, port
+
+
+class _Checker:
+    """Walks the YAML tree collecting every error instead of stopping at the first."""
+
+    def __init__(self, file: str) -> None:
+        self.file = file
+        self.errors: list[ConfigError] = []
+
+    def err(self, key: str, line: int, message: str) -> None:
+        self.errors.append(ConfigError(message, file=self.file, line=line, key=key))
+
+    def mapping(self, parent: MarkedMap, key: str, path: str) -> MarkedMap | None:
+        """`parent[key]` as a mapping; an empty one when absent, None (and an error) when
+        it is something else."""
+        raw = parent.get(key)
+        if raw is None:
+            empty = MarkedMap()
+            empty.line = parent.line_of(key)
+            return empty
+        if not isinstance(raw, MarkedMap):
+            self.err(path, parent.line_of(key), f"expected a mapping, got {kind_of(raw)}")
+            return None
+        return raw
+
+    def values(self, raw: MarkedMap, path: str, fields: Mapping[str, Field],
+               nested: frozenset[str] = frozenset()) -> dict[str, Any]:
+        """Check `raw` against `fields`; keys in `nested` are left for the caller. Returns
+        checked values, defaults for absent keys and for bad ones (None if required)."""
+        for dup, line in raw.duplicates:
+            self.err(f"{path}.{dup}", line, "key given twice")
+        for k in raw:
+            if k not in fields and k not in nested:
+                known = ", ".join(sorted([*fields, *nested])) or "none"
+                self.err(f"{path}.{k}", raw.line_of(k),
+                         f"unknown key (expected one of: {known})")
+        out: dict[str, Any] = {}
+        for k, f in fields.items():
+            if k in raw:
+                try:
+                    out[k] = f.check(raw[k])
+                    continue
+                except ValueError as exc:
+                    self.err(f"{path}.{k}", raw.line_of(k), str(exc))
+            elif f.required:
+                self.err(f"{path}.{k}", raw.line, f"missing; expected {f.expected()}")
+            out[k] = None if f.required else f.default
+        return out
+
+    def mount(self, parent: MarkedMap, key: str, path: str) -> Mount:
+        raw = self.mapping(parent, key, path)
+        if raw is None:
+            return Mount()
+        return Mount(**self.values(raw, path, MOUNT_FIELDS))
+
+
+def load_config(path: str | Path) -> AutonomyConfig:
+    """Load and check `autonomy.yaml`; raises ConfigErrors listing every problem."""
+    config, errors = check_config(path)
+    if errors or config is None:
+        raise ConfigErrors(errors)
+    return config
+
+
+def check_config(path: str | Path) -> tuple[AutonomyConfig | None, list[ConfigError]]:
+    """(config or None, every error found), without touching any hardware."""
+    name = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        return None, [ConfigError(f"cannot read: {exc.strerror or exc}", file=name)]
+    return parse_config(text, name)
+
+
+def parse_config(text: str, name: str = "autonomy.yaml"
+                 ) -> tuple[AutonomyConfig | None, list[ConfigError]]:
+    try:
+        root = load_marked(text)
+    except YamlSyntaxError as exc:
+        return None, [ConfigError(exc.problem, file=name, line=exc.line)]
+    c = _Checker(name)
+    if root is None:
+        root = MarkedMap()
+        root.line = 1
+    if not isinstance(root, MarkedMap):
+        c.err("", 1, f"expected a mapping of sections at the top, got {kind_of(root)}")
+        return None, c.errors
+    for k in root:
+        if k not in TOP_KEYS:
+            c.err(str(k), root.line_of(k),
+                  f"unknown section (expected one of: {', '.join(TOP_KEYS)})")
+    for dup, line in root.duplicates:
+        c.err(str(dup), line, "section given twice")
+
+    backend = DEFAULT_BACKEND
+    if "backend" in root:
+        try:
+            backend = parse_address(root["backend"])
+        except ValueError as exc:
+            c.err("backend", root.line_of("backend"), str(exc))
+    lidar = _lidar(c, root)
+    imu = _imu(c, root)
+    gimbal = _gimbal(c, root)
+    mission = _mission(c, root)
+    if c.errors:
+        return None, c.errors
+    return AutonomyConfig(file=name, backend_host=backend[0], backend_port=backend[1],
+                          lidar=lidar, imu=imu, gimbal=gimbal,
+                          mission=MappingProxyType(mission)), []
+
+
+def _lidar(c: _Checker, root: MarkedMap) -> LidarConfig:
+    raw = c.mapping(root, "lidar", "lidar")
+    if raw is None:
+        return LidarConfig()
+    v = c.values(raw, "lidar", LIDAR_FIELDS, nested=frozenset({"mount"}))
+    return LidarConfig(host=v["host"], port=v["port"], mount=c.mount(raw, "mount", "lidar.mount"))
+
+
+def _imu(c: _Checker, root: MarkedMap) -> ImuConfig:
+    raw = c.mapping(root, "imu", "imu")
+    if raw is None:
+        return ImuConfig()
+    v = c.values(raw, "imu", IMU_FIELDS, nested=frozenset({"mount"}))
+    return ImuConfig(**v, mount=c.mount(raw, "mount", "imu.mount"))
+
+
+def _gimbal(c: _Checker, root: MarkedMap) -> GimbalConfig:
+    raw = c.mapping(root, "gimbal", "gimbal")
+    if raw is None:
+        return GimbalConfig()
+    v = c.values(raw, "gimbal", GIMBAL_FIELDS, nested=frozenset({"pivot", "pan", "tilt"}))
+    pivot_raw = c.mapping(raw, "pivot", "gimbal.pivot")
+    pivot = (0.0, 0.0, 0.0)
+    if pivot_raw is not None:
+        p = c.values(pivot_raw, "gimbal.pivot", PIVOT_FIELDS)
+        pivot = (p["x"], p["y"], p["z"])
+    axes: dict[str, ServoConfig] = {}
+    for axis in ("pan", "tilt"):
+        servo = _servo(c, raw, axis)
+        if servo is not None:
+            axes[axis] = servo
+    if len(axes) == 2 and axes["pan"].channel == axes["tilt"].channel:
+        tilt_raw = raw["tilt"]
+        c.err("gimbal.tilt.channel", tilt_raw.line_of("channel"),
+              f"channel {axes['tilt'].channel} is already the pan servo's")
+    default = GimbalConfig()
+    return GimbalConfig(**v, pivot=pivot, pan=axes.get("pan", default.pan),
+                        tilt=axes.get("tilt", default.tilt))
+
+
+def _servo(c: _Checker, gimbal: MarkedMap, axis: str) -> ServoConfig | None:
+    path = f"gimbal.{axis}"
+    if axis not in gimbal:
+        c.err(path, gimbal.line, f"missing; expected the {axis} servo's mapping "
+              "(channel, min_deg, max_deg, ...)")
+        return None
+    raw = c.mapping(gimbal, axis, path)
+    if raw is None:
+        return None
+    v = c.values(raw, path, SERVO_FIELDS)
+    if any(v[k] is None for k in ("channel", "min_deg", "max_deg")):
+        return None
+    servo = ServoConfig(name=axis, **v)
+    if not servo.min_deg < servo.max_deg:
+        c.err(f"{path}.max_deg", raw.line_of("max_deg"),
+              f"{servo.max_deg:g} must be above min_deg ({servo.min_deg:g})")
+        return None
+    if not servo.min_deg <= 0.0 <= servo.max_deg:
+        c.err(f"{path}.min_deg", raw.line_of("min_deg"),
+              f"the range {servo.min_deg:g}..{servo.max_deg:g} must include 0 "
+              "(straight ahead / level)")
+        return None
+    for key, deg in (("min_deg", servo.min_deg), ("max_deg", servo.max_deg)):
+        pulse = servo.pulse_us(deg)
+        if not PULSE_MIN_US <= pulse <= PULSE_MAX_US:
+            c.err(f"{path}.{key}", raw.line_of(key),
+                  f"{deg:g} deg needs a {pulse:.0f} us pulse (neutral_us "
+                  f"{servo.neutral_us:g} + {servo.us_per_deg:g} us/deg), outside "
+                  f"{PULSE_MIN_US:.0f}-{PULSE_MAX_US:.0f} us")
+    return servo
+
+
+def _mission(c: _Checker, root: MarkedMap) -> dict[str, float]:
+    out: dict[str, float] = {k: f.default for k, f in MISSION_FIELDS.items()}
+    raw = c.mapping(root, "mission", "mission")
+    if raw is None:
+        return out
+    for dup, line in raw.duplicates:
+        c.err(f"mission.{dup}", line, "key given twice")
+    for k, value in raw.items():
+        path = f"mission.{k}"
+        line = raw.line_of(k)
+        if not isinstance(k, str) or not k.isidentifier():
+            c.err(path, line, "a tunable's name must be a word (letters, digits, _)")
+            continue
+        f = MISSION_FIELDS.get(k)
+        try:
+            if f is not None:
+                out[k] = f.check(value)
+            elif (isinstance(value, int | float) and not isinstance(value, bool)
+                  and math.isfinite(value)):
+                out[k] = value
+            else:
+                raise ValueError(f"{value!r} is not a number")
+        except ValueError as exc:
+            c.err(path, line, str(exc))
+    return out
