@@ -174,11 +174,11 @@ class ServoEmulator:
                 continue
             dist = abs(d)
             brake = speed * speed / (2.0 * a)
-            if brake >= dist - 1e-12:
+            if brake >= dist * (1.0 - 1e-12) - 1e-12:
                 # Brake now, exactly enough to stop on the target.
                 dec = speed * speed / (2.0 * dist) if dist > 0.0 else a
                 t_stop = speed / dec if dec > 0.0 else 0.0
-                if h >= t_stop:
+                if h >= t_stop - 1e-9:  # within a nanosecond: there
                     self._x = self.target_deg
                     self._v = 0.0
                     return

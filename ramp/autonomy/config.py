@@ -306,7 +306,7 @@ def _imu(c: _Checker, root: MarkedMap) -> ImuConfig:
 
 def _gimbal(c: _Checker, root: MarkedMap) -> GimbalConfig:
     raw = c.mapping(root, "gimbal", "gimbal")
-    if raw is None:
+    if raw is None or "gimbal" not in root:
         return GimbalConfig()
     v = c.values(raw, "gimbal", GIMBAL_FIELDS, nested=frozenset({"pivot", "pan", "tilt"}))
     pivot_raw = c.mapping(raw, "pivot", "gimbal.pivot")

@@ -11,6 +11,8 @@ Commands are recorded by the HAL and handed to the library from `tick` once the 
 attached, and again after every re-attach (the board forgets them). Target positions go out
 with `setTargetPosition_async` when the library has it, so the tick never waits for a USB
 round trip; its completion, PositionChange and TargetPositionReached arrive as queued events.
+A channel is engaged only once its target write has completed, since an RC servo jumps to
+whatever target the controller holds at that moment.
 """
 
 from __future__ import annotations
@@ -55,7 +57,8 @@ class PhidgetServo(Servo):
         self.gimbal = gimbal
         self.handle: Any = None
         self.sign = -1.0 if config.reversed else 1.0
-        self.sent: dict[str, Any] = {}  # what the library holds: key -> value
+        self.sent: dict[str, Any] = {}  # what the library was given: key -> value
+        self.has_target = False  # the controller holds a target (engaging is allowed)
         self.retry_at = -math.inf
 
     def to_units(self, deg: float) -> float:
@@ -192,6 +195,7 @@ class PhidgetPanTilt(PanTilt):
             return
         axis.attached = True
         axis.sent = {}  # the board forgot everything: write it all again
+        axis.has_target = False
         axis.retry_at = -math.inf
         log.info("%s: %s %s (%s) attached", self.name, self.where(), axis.where(), axis.label)
         if self.attached:
@@ -205,7 +209,9 @@ class PhidgetPanTilt(PanTilt):
 
     def _on_written(self, axis: PhidgetServo, payload: tuple[float, int], now: float) -> None:
         units, code = payload
-        if code and axis.sent.get("target") == units:
+        if not code:
+            axis.has_target = True
+        elif axis.sent.get("target") == units:
             axis.sent.pop("target", None)
             axis.retry_at = now + pc.RETRY_S
             log.warning("%s: %s: setting target %g failed with code %s", self.name,
@@ -233,8 +239,9 @@ class PhidgetPanTilt(PanTilt):
                 units = axis.to_units(axis.target_deg)
                 if axis.sent.get("target") != units:
                     self._send_target(axis, units)
+            # Engage only once the controller holds a target: it jumps straight to it.
             if axis.sent.get("engaged") != axis.engaged and (
-                    axis.target_deg is not None or not axis.engaged):
+                    axis.has_target or not axis.engaged):
                 ch.setEngaged(axis.engaged)
                 axis.sent["engaged"] = axis.engaged
         except api.PhidgetException as exc:
@@ -244,10 +251,11 @@ class PhidgetPanTilt(PanTilt):
 
     def _send_target(self, axis: PhidgetServo, units: float) -> None:
         ch = axis.handle
-        axis.sent["target"] = units
         set_async = getattr(ch, "setTargetPosition_async", None)
         if set_async is None:
             ch.setTargetPosition(units)
+            axis.sent["target"] = units
+            axis.has_target = True
             return
         q = self._queue
         idx = self.axes.index(axis)
@@ -256,6 +264,7 @@ class PhidgetPanTilt(PanTilt):
             q.put(("written", idx, (units, int(code))))  # library thread: enqueue only
 
         set_async(units, on_done)
+        axis.sent["target"] = units  # in flight; a failure event clears it for a retry
 
 
 def _clamp(value: float, lo: Any, hi: Any) -> float:

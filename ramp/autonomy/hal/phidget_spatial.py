@@ -7,9 +7,10 @@ scheduler's thread. After a USB re-attach the board restarts its timestamp from 
 its data interval (ros-drivers/phidgets_drivers 1.0.5 changelog), so the interval is set again
 on every attach and the timestamp is re-anchored whenever it runs backwards.
 
-Sample times: `t` is the board's timestamp laid onto the scheduler's clock, anchored at the
-first sample after an attach and never later than the tick that drains it, so the spacing
-between samples is the board's (exact) and not the USB's (jittery).
+Sample times: `t` is the board's timestamp laid onto the scheduler's clock, anchored when the
+first samples after an attach are drained (the newest of them at that tick) and never later
+than the tick that drains a sample, so the spacing between samples is the board's (exact) and
+not the USB's (jittery).
 """
 
 from __future__ import annotations
@@ -93,16 +94,21 @@ class PhidgetImu(Imu):
         self._ch = ch
 
     def _tick(self, now: float, dt: float) -> None:
+        run: list[tuple[Any, ...]] = []  # consecutive samples, timed together
         for event, _which, payload in pc.drain(self._queue):
             if event == "data":
                 if self._attached:
-                    self._sample(now, *payload)
-            elif event == "attach":
+                    run.append(payload)
+                continue
+            self._samples(now, run)
+            run = []
+            if event == "attach":
                 self._on_attach(now)
             elif event == "detach":
                 self._detach(f"{self.where()} detached")
             elif event == "error":
                 self._on_error(*payload)
+        self._samples(now, run)
 
     def _close(self) -> None:
         ch, self._ch = self._ch, None
@@ -142,20 +148,33 @@ class PhidgetImu(Imu):
             self._error_code = key
             log.warning("%s: %s: error event %s: %s", self.name, self.where(), key, description)
 
-    def _sample(self, now: float, accel: tuple[float, ...], gyro: tuple[float, ...],
-                mag: tuple[float, ...], timestamp_ms: float) -> None:
-        ms = float(timestamp_ms)
-        if self._anchor is None or self._last_ms is None or ms < self._last_ms:
-            self._anchor = (now, ms)
-        self._last_ms = ms
-        t0, ms0 = self._anchor
-        t = t0 + (ms - ms0) / 1000.0
-        if t > now:  # the board's clock ran ahead of ours: never report the future
-            self._anchor = (t0 - (t - now), ms0)
-            t = now
-        self._error_code = None
-        self._accept(ImuSample(t=t, timestamp_ms=ms, accel_g=_vec(accel), gyro_dps=_vec(gyro),
-                               mag_gauss=_mag(mag)), now)
+    def _samples(self, now: float, run: list[tuple[Any, ...]]) -> None:
+        """Lay the board's timestamps onto the clock: a fresh anchor (after an attach, or
+        when the board's time runs backwards) puts the newest sample of its stretch at
+        `now`, and no sample is ever later than `now`."""
+        start = 0
+        for i in range(len(run) + 1):
+            if i < len(run) and not (i > start and float(run[i][3]) < float(run[i - 1][3])):
+                continue
+            part = run[start:i]
+            start = i
+            if not part:
+                continue
+            first_ms, last_ms = float(part[0][3]), float(part[-1][3])
+            if self._anchor is None or self._last_ms is None or first_ms < self._last_ms:
+                self._anchor = (now, last_ms)
+            t0, ms0 = self._anchor
+            late = t0 + (last_ms - ms0) / 1000.0 - now
+            if late > 0.0:  # the board's clock ran ahead of ours: never report the future
+                self._anchor = (t0 - late, ms0)
+            t0, ms0 = self._anchor
+            for accel, gyro, mag, timestamp_ms in part:
+                ms = float(timestamp_ms)
+                self._accept(ImuSample(t=t0 + (ms - ms0) / 1000.0, timestamp_ms=ms,
+                                       accel_g=_vec(accel), gyro_dps=_vec(gyro),
+                                       mag_gauss=_mag(mag)), now)
+            self._last_ms = last_ms
+            self._error_code = None
 
 
 def _vec(v: tuple[float, ...]) -> Vec3:

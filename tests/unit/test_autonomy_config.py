@@ -1,0 +1,230 @@
+"""`autonomy.yaml`: the example loads, and every error names file:line: key.path."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from ramp.autonomy.cli import main
+from ramp.autonomy.config import (
+    MISSION_FIELDS,
+    AutonomyConfig,
+    check_config,
+    load_config,
+    parse_address,
+    parse_config,
+)
+from ramp.autonomy.mount import Mount, euler_zyx, lidar_pose, mat_vec, rotation_zyx
+from ramp.errors import ConfigErrors
+
+REPO = Path(__file__).resolve().parents[2]
+EXAMPLE = REPO / "autonomy.yaml"
+
+
+def errors_of(text: str) -> list[str]:
+    cfg, errors = parse_config(textwrap.dedent(text), "a.yaml")
+    assert cfg is None or not errors
+    return [str(e) for e in errors]
+
+
+def test_the_example_for_marte_loads() -> None:
+    cfg = load_config(EXAMPLE)
+    assert cfg.backend == "192.168.0.20:5577"
+    assert (cfg.lidar.host, cfg.lidar.port) == ("192.168.0.10", 10940)
+    assert cfg.imu.driver == "phidget" and cfg.imu.data_interval_ms == 8
+    assert cfg.imu.mount == Mount(x=0.0, y=0.10, z=0.35)
+    g = cfg.gimbal
+    assert (g.pan.channel, g.tilt.channel) == (0, 1) and g.tilt.reversed
+    assert (g.tilt.min_deg, g.tilt.max_deg) == (-30.0, 45.0)
+    assert g.pivot == (0.45, 0.0, 0.55)
+    assert cfg.mission["duration_s"] == 600.0 and cfg.mission["max_relocalize_tries"] == 3
+
+
+def test_an_empty_file_gives_the_defaults() -> None:
+    cfg, errors = parse_config("", "a.yaml")
+    assert errors == [] and cfg is not None
+    assert cfg.backend == "127.0.0.1:5577" and cfg.lidar.port == 10940
+    assert dict(cfg.mission) == {k: f.default for k, f in MISSION_FIELDS.items()}
+    assert isinstance(cfg, AutonomyConfig) and cfg.imu.driver == "phidget"
+
+
+def test_every_error_is_reported_at_once_with_file_line_and_key() -> None:
+    errs = errors_of("""\
+        backend: robot
+        lidar: {host: 192.168.0.10, port: 70000}
+        imu:
+          driver: xsens
+          data_interval_ms: 0
+          mount: {x: 0.1, pich: 3}
+        gimbal:
+          pan: {channel: 0, min_deg: -90, max_deg: 90}
+          tilt: {channel: 0, min_deg: -30, max_deg: 45, velocity_dps: fast}
+        mission:
+          duration_s: -5
+          crater_margin_m: 0.2
+          name: fred
+        radar: {}
+        """)
+    assert errs == [
+        "a.yaml:14: radar: unknown section (expected one of: backend, lidar, imu, gimbal, "
+        "mission)",
+        "a.yaml:1: backend: 'robot' is not an address; expected HOST:PORT (for example "
+        "192.168.1.10:5577)",
+        "a.yaml:2: lidar.port: 70000 is not a TCP port (1-65535)",
+        "a.yaml:4: imu.driver: 'xsens' is not an IMU driver (one of phidget, sim)",
+        "a.yaml:5: imu.data_interval_ms: 0 is not a sample interval in ms (1-1000)",
+        "a.yaml:6: imu.mount.pich: unknown key (expected one of: pitch, roll, x, y, yaw, z)",
+        "a.yaml:9: gimbal.tilt.velocity_dps: 'fast' is not a speed in deg/s (1-2000)",
+        "a.yaml:9: gimbal.tilt.channel: channel 0 is already the pan servo's",
+        "a.yaml:11: mission.duration_s: -5 is not a run length in s (1-86400)",
+        "a.yaml:13: mission.name: 'fred' is not a number",
+    ]
+
+
+@pytest.mark.parametrize(("tilt", "message"), [
+    ("{channel: 1, min_deg: 40, max_deg: 10}", "a.yaml:4: gimbal.tilt.max_deg: 10 must be "
+     "above min_deg (40)"),
+    ("{channel: 1, min_deg: 5, max_deg: 40}", "a.yaml:4: gimbal.tilt.min_deg: the range "
+     "5..40 must include 0"),
+    ("{channel: 1, min_deg: -30, max_deg: 150}", "a.yaml:4: gimbal.tilt.max_deg: 150 deg "
+     "needs a 3000 us pulse"),
+    ("{channel: 1, min_deg: -30}", "a.yaml:4: gimbal.tilt.max_deg: missing; expected an "
+     "angle in degrees (-180-180)"),
+    ("{channel: 1, min_deg: -30, max_deg: 30, speed: 3}", "a.yaml:4: gimbal.tilt.speed: "
+     "unknown key"),
+    ("[1, 2]", "a.yaml:4: gimbal.tilt: expected a mapping, got a list"),
+])
+def test_servo_blocks_are_checked_across_their_keys(tilt: str, message: str) -> None:
+    errs = errors_of(f"""\
+        gimbal:
+          driver: sim
+          pan: {{channel: 0, min_deg: -90, max_deg: 90}}
+          tilt: {tilt}
+        """)
+    assert len(errs) == 1 and errs[0].startswith(message), errs
+
+
+def test_a_gimbal_without_its_axes_says_which_is_missing() -> None:
+    errs = errors_of("""\
+        gimbal:
+          driver: phidget
+          pan: {channel: 0, min_deg: -90, max_deg: 90}
+        """)
+    assert errs == ["a.yaml:2: gimbal.tilt: missing; expected the tilt servo's mapping "
+                    "(channel, min_deg, max_deg, ...)"]
+
+
+def test_keys_given_twice_and_broken_yaml_are_located() -> None:
+    errs = errors_of("""\
+        imu:
+          serial: 1
+          serial: 2
+        """)
+    assert errs == ["a.yaml:3: imu.serial: key given twice"]
+    errs = errors_of("imu: {serial: [1, 2}\n")
+    assert len(errs) == 1 and errs[0].startswith("a.yaml:1: not valid YAML")
+    assert errors_of("- 1\n- 2\n") == ["a.yaml:1: expected a mapping of sections at the top, "
+                                       "got a list"]
+
+
+def test_mission_accepts_any_named_number_and_checks_the_known_ones() -> None:
+    cfg, errors = parse_config("mission: {duration_s: 300, scan_step_deg: 2.5, tries: 4}\n")
+    assert errors == [] and cfg is not None
+    assert cfg.mission["duration_s"] == 300.0 and cfg.mission["scan_step_deg"] == 2.5
+    assert cfg.mission["end_margin_s"] == 30.0  # known names get their default
+    errs = errors_of("mission: {max_relocalize_tries: 2.5, x: .nan, ok: true}\n")
+    assert errs == [
+        "a.yaml:1: mission.max_relocalize_tries: 2.5 is not a number of tries (0-100)",
+        "a.yaml:1: mission.x: nan is not a number",
+        "a.yaml:1: mission.ok: True is not a number",
+    ]
+
+
+@pytest.mark.parametrize(("text", "expected"), [
+    ("10.0.0.2:5577", ("10.0.0.2", 5577)),
+    ("marte.local:1", ("marte.local", 1)),
+    ("[::1]:5577", ("::1", 5577)),
+])
+def test_backend_addresses_parse(text: str, expected: tuple[str, int]) -> None:
+    assert parse_address(text) == expected
+
+
+@pytest.mark.parametrize("text", ["5577", ":5577", "host:", "host:0", "host:99999", "a b:1"])
+def test_bad_backend_addresses_are_refused(text: str) -> None:
+    with pytest.raises(ValueError):
+        parse_address(text)
+
+
+def test_an_unreadable_file_is_one_error_naming_it(tmp_path: Path) -> None:
+    cfg, errors = check_config(tmp_path / "nope.yaml")
+    assert cfg is None and len(errors) == 1 and "nope.yaml: cannot read" in str(errors[0])
+    with pytest.raises(ConfigErrors):
+        load_config(tmp_path / "nope.yaml")
+
+
+# -- the command line ---------------------------------------------------------------------------
+def test_check_prints_ok_for_the_example(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["check", str(EXAMPLE)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"{EXAMPLE}: ok") and "pan channel 0 -90..90 deg" in out
+
+
+def test_check_lists_every_error_and_fails(tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "autonomy.yaml"
+    bad.write_text("backend: x\nimu: {serial: -7}\n")
+    assert main(["check", str(bad)]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == f"{bad}:1: backend: 'x' is not an address; expected HOST:PORT (for " \
+                     "example 192.168.1.10:5577)"
+    assert err[1].startswith(f"{bad}:2: imu.serial: -7 is not a Phidget serial number")
+    assert err[-1] == f"ramp-autonomy: 2 error(s) in {bad}"
+
+
+def test_without_a_command_it_says_what_is_available(capsys: pytest.CaptureFixture[str]
+                                                     ) -> None:
+    assert main([]) == 2
+    assert "ramp-autonomy check FILE" in capsys.readouterr().err
+
+
+# -- mounts -------------------------------------------------------------------------------------
+def test_euler_angles_round_trip() -> None:
+    for angles in [(0.1, -0.3, 2.5), (-1.0, 0.7, -3.0), (0.0, 0.0, 0.0)]:
+        assert euler_zyx(rotation_zyx(*angles)) == pytest.approx(angles)
+
+
+def test_pan_turns_the_lidar_left_and_tilt_points_it_down() -> None:
+    lidar = Mount(x=0.5, y=0.0, z=0.6)
+    pivot = (0.45, 0.0, 0.55)
+    pos, rot = lidar_pose(lidar, pivot, 0.0, 0.0)
+    assert pos == pytest.approx((0.5, 0.0, 0.6)) and mat_vec(rot, (1, 0, 0)) == pytest.approx(
+        (1, 0, 0))
+    pos, rot = lidar_pose(lidar, pivot, 90.0, 0.0)
+    assert pos == pytest.approx((0.45, 0.05, 0.6))  # swung about the pivot to the left
+    assert mat_vec(rot, (1, 0, 0)) == pytest.approx((0, 1, 0), abs=1e-12)
+    _pos, rot = lidar_pose(lidar, pivot, 0.0, 30.0)
+    beam = mat_vec(rot, (1, 0, 0))
+    assert beam[2] == pytest.approx(-math.sin(math.radians(30)))  # nose down
+
+
+# -- isolation ----------------------------------------------------------------------------------
+def test_the_autonomy_hardware_modules_do_not_import_the_backend() -> None:
+    code = textwrap.dedent("""\
+        import sys
+        import ramp.autonomy.cli, ramp.autonomy.config, ramp.autonomy.mount
+        import ramp.autonomy.hal.interfaces, ramp.autonomy.hal.sim
+        import ramp.autonomy.hal.phidget_spatial, ramp.autonomy.hal.phidget_servo
+        banned = ("ramp.layers", "ramp.functional", "ramp.hal", "ramp.server",
+                  "ramp.supervisor", "ramp.config", "ramp.sim", "firmware_like")
+        bad = sorted(m for m in sys.modules if m.split(".")[0] == "firmware_like"
+                     or any(m == b or m.startswith(b + ".") for b in banned))
+        print(bad)
+        """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=REPO)
+    assert out.stdout.strip() == "[]"
