@@ -118,6 +118,18 @@ def render(doc: dict[str, Any]) -> str:
                 _row("VmRSS at ready", s["rss_mb_at_ready"], " MB"),
                 _row(f"VmRSS after {s['rss_mb_after']['seconds']:g} s", s["rss_mb_after"], " MB"),
                 _row("SIGTERM → exit, median", s["sigterm_to_exit_ms"]["median"], " ms"), ""]
+    a = doc.get("autonomy_sensors")
+    if a and "error" not in a:
+        out += [f"**autonomy_sensors** (IMU and gimbal emulators, {a['simulated_s']:g} "
+                f"simulated s, a sample every {a['data_interval_ms']} ms; baseline: 6 normals "
+                "and two tuples per sample)", "", HEAD]
+        for fault in ("none", "gyro-drift", "imu-shift"):
+            out.append(_row(f"IMU, fault {fault}: CPU per sample",
+                            a[f"imu_{fault}"]["us_per_sample"], " µs"))
+        g = a["gimbal"]
+        out += ["", f"Gimbal emulator: {_num(g['us_per_tick'])} µs per 10 ms tick; IMU "
+                f"{_num(a['imu_none']['cpu_s_per_simulated_minute'])} s of CPU per simulated "
+                "minute.", ""]
     return "\n".join(out)
 
 

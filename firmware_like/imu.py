@@ -157,6 +157,7 @@ class ImuEmulator:
         self.shift_deg = float(prng.uniform(md.shift_min_deg, md.shift_max_deg))
         azimuth = float(prng.uniform(0.0, 2.0 * math.pi))
         self.shift_axis: Vec3 = (math.cos(azimuth), math.sin(azimuth), 0.0)
+        self._shifted: Mat3 | None = None  # the mount once the shift is over
         self._noise_rng = np.random.default_rng(noise_seq)
         self._noise = np.empty(0)
         self._noise_at = 0
@@ -282,11 +283,15 @@ class ImuEmulator:
         rot = self.mount_rotation
         rate = omega
         frac = self.shift_fraction(ts)
-        if frac > 0.0:
+        if frac >= 1.0:
+            if self._shifted is None:
+                turn = _axis_angle(self.shift_axis, math.radians(self.shift_deg))
+                self._shifted = _mat_mul(turn, rot)
+            rot = self._shifted
+        elif frac > 0.0:  # the board is turning on its mount: the gyro feels it too
             theta = math.radians(self.shift_deg)
             rot = _mat_mul(_axis_angle(self.shift_axis, theta * frac), rot)
-            if frac < 1.0:  # the board is turning on its mount: the gyro feels it
-                rate = _add(rate, _scale(self.shift_axis, theta / md.shift_duration_s))
+            rate = _add(rate, _scale(self.shift_axis, theta / md.shift_duration_s))
         force_s = _mat_t_vec(rot, force)
         rate_s = _mat_t_vec(rot, rate)
         n = self._draw()
