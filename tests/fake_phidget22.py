@@ -172,6 +172,7 @@ class FakeRCServo(FakeChannel):
         self.writes: list[tuple[str, Any]] = []
         self.pending: list[tuple[float, Callable[..., None]]] = []
         self.async_supported = True
+        self.refuse_targets = 0  # the next n target writes fail (a USB hiccup)
 
     def reset_settings(self) -> None:
         self.min_pulse, self.max_pulse = 544.0, 2400.0
@@ -257,6 +258,9 @@ class FakeRCServo(FakeChannel):
 
     def _check_target(self, p: float) -> None:
         self.need_attached()
+        if self.refuse_targets:
+            self.refuse_targets -= 1
+            raise FakePhidgetException(EPHIDGET_NOTATTACHED, "busy")
         if not self.min_pos <= p <= self.max_pos:
             raise FakePhidgetException(EPHIDGET_OUTOFBOUNDS, "target out of bounds")
 

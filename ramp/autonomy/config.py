@@ -3,7 +3,7 @@
 The autonomy's file, not the backend's: the backend's address, the LIDAR's address and
 mount, the IMU board and mount, the pan/tilt servo board and its two axes, and the mission's
 tunable numbers. Like `ramp.yaml`'s loader, every error names the file, the line, the key path
-and what was expected (`autonomy.yaml:14: gimbal.tilt.max_deg: 200.0 is not an angle in
+and what was expected (`autonomy.yaml:14: gimbal.tilt.max_deg: 200 is not an angle in
 degrees (-180-180)`), and all of them are collected in one pass so `ramp-autonomy check`
 shows everything to fix at once.
 

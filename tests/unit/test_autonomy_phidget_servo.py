@@ -131,6 +131,19 @@ def test_a_refused_target_write_is_retried_a_little_later(lib: FakeLibrary) -> N
     assert [p for p, _ in pan.pending] == [5.0]
 
 
+def test_a_target_the_library_throws_back_is_not_lost(lib: FakeLibrary) -> None:
+    g, pan, tilt = open_gimbal(lib)
+    pan.async_supported = tilt.async_supported = False
+    plug_both(pan, tilt)
+    pan.refuse_targets = 1
+    g.point(15.0, 0.0)
+    g.engage()
+    g.tick(0.01, 0.01)
+    assert pan.target is None and not pan.engaged  # refused: nothing engaged on no target
+    g.tick(0.02 + RETRY_S, 0.01)
+    assert pan.target == 15.0 and pan.engaged
+
+
 def test_detach_is_a_fault_and_reattach_sends_everything_again(lib: FakeLibrary) -> None:
     g, pan, tilt = open_gimbal(lib)
     plug_both(pan, tilt)
