@@ -10,6 +10,7 @@ import argparse
 import asyncio
 import logging
 import re
+import signal
 import socket
 import sys
 from collections.abc import Sequence
@@ -114,6 +115,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     config = uvicorn.Config(create_app(console), ws="websockets-sansio", lifespan="on",
                             log_level="warning", timeout_graceful_shutdown=2)
     server = uvicorn.Server(config)
+    # uvicorn shuts down gracefully on SIGINT/SIGTERM (the console stops what it moved), then
+    # raises the signal again to whatever handler was there before; this one makes that the
+    # end of it, so Ctrl-C and `kill` exit 0 without a traceback.
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda signum, frame: setattr(server, "should_exit", True))
 
     async def serve() -> None:
         task = asyncio.create_task(server.serve(sockets=[sock]))

@@ -57,7 +57,9 @@ class Link:
                 client = await AsyncMcpClient.connect(self.host, self.port,
                                                       timeout=self.answer_timeout)
             except ConnectionError as exc:
-                self._set_detail(str(exc))
+                if str(exc) != self.detail:  # say why once, not at every retry
+                    self.detail = str(exc)
+                    self._notify(False)
                 await asyncio.sleep(self.retry)
                 continue
             self.client = client
@@ -71,7 +73,7 @@ class Link:
             self.client = None
             if self._stopping:
                 break
-            self._set_detail(f"lost: {client.close_reason}")
+            self.detail = f"lost: {client.close_reason}"
             self._notify(False)
             await asyncio.sleep(self.retry)
 
@@ -104,10 +106,6 @@ class Link:
         self._stopping = True
         if self.client is not None:
             await self.client.close()
-
-    def _set_detail(self, detail: str) -> None:
-        if detail != self.detail:
-            self.detail = detail
 
     def _notify(self, up: bool) -> None:
         log.info("%s link %s: %s", self.role, "up" if up else "down", self.detail)

@@ -17,6 +17,7 @@ import re
 import select
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -208,14 +209,14 @@ def wait_for(check: Callable[[], bool], timeout: float, what: str) -> float:
 
 def pad(page: Any, *, axes: list[float] | None = None, **buttons: float) -> None:
     """Set the fake pad: `pad(page, axes=[0, -1, 0, 0], b4=1, b7=0.8)`."""
-    script = ["(() => { const p = window.__pad;"]
-    if axes is not None:
-        script.append(f"p.axes = {axes!r};")
-    for name, v in buttons.items():
-        i = int(name[1:])
-        script.append(f"p.buttons[{i}] = {{pressed: {str(v >= 0.5).lower()}, touched: {str(v > 0).lower()}, value: {v}}};")
-    script.append("p.timestamp += 1; })()")
-    page.evaluate(" ".join(script))
+    values = {int(name[1:]): v for name, v in buttons.items()}
+    page.evaluate("""([axes, values]) => {
+        const p = window.__pad;
+        if (axes !== null) p.axes = axes;
+        for (const [i, v] of Object.entries(values))
+            p.buttons[Number(i)] = {pressed: v >= 0.5, touched: v > 0, value: v};
+        p.timestamp += 1;
+    }""", [axes, values])
 
 
 def all_stopped(client: McpClient) -> bool:
@@ -404,3 +405,49 @@ def test_profiles_switch_from_the_page_and_a_broken_one_shows_file_and_line(
 
 def test_chromium_is_the_system_one() -> None:
     assert shutil.which("chromium") or Path(CHROMIUM).exists()
+
+
+def test_a_lost_robot_shows_at_once_and_the_reconnect_does_not_resume_motion(
+        browser: Any, config_home: Path) -> None:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    args = ["--sim", "--host", "127.0.0.1", "--port", str(port)]
+    proc, host, _ = start_ramp(args, stderr=subprocess.DEVNULL)
+    own = Teleop(f"{host}:{port}", config_home)
+    page = None
+    try:
+        page = open_page(browser, own.url)
+        page.get_by_test_id("take-control").click()
+        sync_api.expect(page.get_by_test_id("value:robot:control.owner")).to_have_text(OPERATOR)
+        pad(page, axes=[0, -1, 0, 0], b4=1.0)
+        with McpClient(host, port) as first:
+            wait_for(lambda: all(v > 0 for v in wheels(first)), 1.0, "driving")
+        proc.kill()
+        proc.wait(timeout=5)
+        if proc.stdout is not None:
+            proc.stdout.close()
+        sync_api.expect(page.get_by_test_id("link")).to_have_text("robot link lost",
+                                                                   timeout=1000)
+        proc, _, _ = start_ramp(args, stderr=subprocess.DEVNULL)
+        sync_api.expect(page.get_by_test_id("link")).to_contain_text("link ok", timeout=5000)
+        with McpClient(host, port) as second:
+            time.sleep(0.5)  # LB and the stick are still held: nothing resumes
+            assert all_stopped(second)
+            sync_api.expect(page.get_by_test_id("drive-state")).to_contain_text("LATCHED")
+            pad(page, b4=0.0)
+            time.sleep(0.15)
+            pad(page, b4=1.0)
+            wait_for(lambda: all(v > 0 for v in wheels(second)), 1.0, "driving after re-press")
+            pad(page, axes=[0, 0, 0, 0], b4=0.0)
+            wait_for(lambda: all_stopped(second), 0.5, "stopped")
+            # Control, held before the loss, was taken again on the new connection.
+            assert robot_state(second)["robot:control.owner"] == OPERATOR
+    finally:
+        if page is not None:
+            page.close()
+        own.close()
+        proc.kill()
+        proc.wait(timeout=5)
+        if proc.stdout is not None:
+            proc.stdout.close()
