@@ -17,6 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from starlette.applications import Starlette
+from starlette.middleware import Middleware
+from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.requests import Request
 from starlette.responses import FileResponse, Response
 from starlette.routing import Mount, Route, WebSocketRoute
@@ -32,6 +34,7 @@ log = logging.getLogger("ramp.teleop")
 _QUEUE = 256
 #: Largest message a page may send; inputs are a few hundred bytes.
 _MAX_MESSAGE = 16384
+LOCAL_HOSTS = ["127.0.0.1", "localhost", "[::1]"]
 
 
 def static_dir() -> Path:
@@ -69,6 +72,13 @@ def create_app(console: Console) -> Starlette:
         return FileResponse(index_file, headers={"Cache-Control": "no-store"})
 
     async def page_socket(ws: WebSocket) -> None:
+        # A page from any other site open in the same browser could otherwise reach this
+        # socket on 127.0.0.1 and drive the robot (cross-site WebSocket hijacking).
+        origin = ws.headers.get("origin")
+        if origin is not None and origin != f"http://{ws.headers.get('host', '')}":
+            log.warning("refused a page socket from origin %s", origin)
+            await ws.close(code=1008)
+            return
         await ws.accept()
         sock = _PageSocket(ws)
         page = console.open_page(sock.post)
@@ -104,4 +114,7 @@ def create_app(console: Console) -> Starlette:
         WebSocketRoute("/ws", page_socket),
         Mount("/static", StaticFiles(directory=static_dir()), name="static"),
     ]
-    return Starlette(routes=routes, lifespan=lifespan)
+    # Only names of this machine: a DNS-rebinding page (evil.example resolving to 127.0.0.1)
+    # sends its own Host and is refused.
+    middleware = [Middleware(TrustedHostMiddleware, allowed_hosts=LOCAL_HOSTS)]
+    return Starlette(routes=routes, lifespan=lifespan, middleware=middleware)

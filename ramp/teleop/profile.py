@@ -109,7 +109,7 @@ class Binding:
         else:
             assert self.press is not None
             what = f"press {BUTTON_NAMES[self.press]} (button {self.press})"
-        params = f"({','.join(self.params)})" if self.press is not None else ""
+        params = f"=({','.join(self.params)})" if self.press is not None else ""
         return f"{what} -> {self.request}{params}"
 
 

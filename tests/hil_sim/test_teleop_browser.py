@@ -451,3 +451,14 @@ def test_a_lost_robot_shows_at_once_and_the_reconnect_does_not_resume_motion(
         proc.wait(timeout=5)
         if proc.stdout is not None:
             proc.stdout.close()
+
+
+def test_another_sites_page_cannot_open_the_console_socket(teleop: Teleop) -> None:
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    ws_url = teleop.url.replace("http://", "ws://") + "ws"
+    with pytest.raises(InvalidStatus), connect(ws_url, origin="http://evil.example"):
+        pass
+    with connect(ws_url, origin=teleop.url.rstrip("/"), open_timeout=5) as ws:
+        assert '"type":"hello"' in str(ws.recv(timeout=5))
