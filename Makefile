@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: run test lint bench bench-quick fuzz soak clean
+.PHONY: run teleop test lint bench bench-quick fuzz soak clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -15,6 +15,15 @@ $(STAMP): pyproject.toml
 
 run: $(STAMP)
 	$(VENV)/bin/ramp run --sim --config ramp.yaml --host 127.0.0.1
+
+# A first look at the operator console: simulated MARTE and ramp-teleop together; Ctrl-C
+# stops both. Open the address it prints (http://127.0.0.1:8080/).
+ROBOT_PORT ?= 5577
+TELEOP_PORT ?= 8080
+teleop: $(STAMP)
+	@$(VENV)/bin/ramp run --sim --config ramp.yaml --host 127.0.0.1 --port $(ROBOT_PORT) & \
+	robot=$$!; trap 'kill $$robot 2>/dev/null; wait $$robot 2>/dev/null' EXIT; \
+	$(VENV)/bin/ramp-teleop --backend 127.0.0.1:$(ROBOT_PORT) --http-port $(TELEOP_PORT)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check ramp firmware_like tests bench

@@ -1,8 +1,8 @@
-"""A small blocking MCP client for the shell, benchmarks, autonomy and tests.
+"""A small blocking MCP client for the shell, benchmarks and tests.
 
-It blocks by design: it runs in a client process, never in the supervisor's tick. Each
-`send` writes one message and the server answers every message with exactly one line, so
-`request` pairs them without any bookkeeping as long as every `send` is followed by a `recv`.
+It blocks by design: it runs in a client process, never in the supervisor's tick. The
+pairing of messages and lines is `ramp.mcp.session.McpSession`'s, which the asyncio client
+shares; this file only moves bytes over a socket and waits.
 """
 
 from __future__ import annotations
@@ -15,12 +15,13 @@ from types import TracebackType
 
 from ramp.errors import ProtocolError
 from ramp.mcp.messages import Request, Response
-from ramp.mcp.protocol import LineSplitter, TooLong, format_requests, parse_response_line
+from ramp.mcp.protocol import parse_response_line
+from ramp.mcp.session import MAX_RESPONSE_LINE, McpSession, Reply
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 5577
-# A describe of a large robot runs to a few kilobytes; anything near this is not MCP.
-MAX_RESPONSE_LINE = 1 << 20
+__all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "MAX_RESPONSE_LINE", "McpClient", "errors",
+           "parse_address"]
 
 
 def parse_address(text: str | None, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
@@ -69,8 +70,8 @@ class McpClient:
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
                  timeout: float = 2.0) -> None:
         self.host, self.port, self.timeout = host, port, timeout
-        self._lines: deque[bytes] = deque()
-        self._splitter = LineSplitter(MAX_RESPONSE_LINE)
+        self._session: McpSession[None] = McpSession(MAX_RESPONSE_LINE)
+        self._lines: deque[Reply[None]] = deque()
         self._sock: socket.socket | None = socket.create_connection((host, port), timeout)
         # Requests are small and latency matters more than packet count (one request, one
         # answer): without this Nagle holds a message back behind an unacknowledged one.
@@ -102,17 +103,7 @@ class McpClient:
     def send(self, message: str | bytes | Request | Iterable[Request] = "") -> None:
         """Write one message; the `\\n` is added here, so the text must not contain one."""
         sock = self._connected()
-        if isinstance(message, Request):
-            data = format_requests([message])
-        elif isinstance(message, str | bytes):
-            raw = message.encode("ascii") if isinstance(message, str) else message
-            if raw.endswith(b"\n"):
-                raw = raw[:-1]
-            if b"\n" in raw:
-                raise ValueError("one message per send: the text contains a line break")
-            data = raw + b"\n"
-        else:
-            data = format_requests(message)
+        data = self._session.send(message)
         try:
             sock.sendall(data)
         except OSError as exc:
@@ -145,11 +136,11 @@ class McpClient:
             if not data:
                 self.close()
                 raise ConnectionError(f"{self.host}:{self.port} closed the connection")
-            for item in self._splitter.feed(data):
-                if isinstance(item, TooLong):
-                    raise ProtocolError(f"response line longer than {MAX_RESPONSE_LINE} bytes")
-                self._lines.append(item)
-        return self._lines.popleft()
+            self._lines.extend(self._session.feed(data))
+        reply = self._lines.popleft()
+        if reply.error is not None:
+            raise ProtocolError(reply.error)
+        return reply.line
 
     def request(self, message: str | bytes | Request | Iterable[Request]) -> list[Response]:
         """Send one message and return its responses."""
@@ -165,6 +156,7 @@ class McpClient:
         sock, self._sock = self._sock, None
         if sock is not None:
             sock.close()
+            self._session.reset()
 
     def _connected(self) -> socket.socket:
         if self._sock is None:

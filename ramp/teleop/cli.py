@@ -1,0 +1,137 @@
+"""`ramp-teleop --backend HOST:PORT [--http-port P] [--name operator] [--profile NAME]`.
+
+Serves the operator console on 127.0.0.1 (the page drives a robot: it is not offered to the
+network) and prints `ramp-teleop: open http://127.0.0.1:PORT/` once it is serving.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import re
+import signal
+import socket
+import sys
+from collections.abc import Sequence
+
+from ramp.mcp.client import parse_address
+from ramp.teleop.profile import DEFAULT_PROFILE, ProfileError, ProfileLibrary
+
+HTTP_HOST = "127.0.0.1"
+_NAME = re.compile(r"[A-Za-z0-9_-]{1,32}\Z")
+EXIT_OK, EXIT_USAGE = 0, 2
+
+
+def _name(text: str) -> str:
+    if not _NAME.match(text) or text == "none":
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: 1-32 letters, digits, '_' or '-' ('none' is reserved)")
+    return text
+
+
+def _battery(text: str) -> tuple[float, float]:
+    try:
+        empty, full = (float(x) for x in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected EMPTY:FULL volts, e.g. 17:21") from None
+    if not 0 <= empty < full:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected 0 <= EMPTY < FULL")
+    return empty, full
+
+
+def _rate(text: str) -> float:
+    try:
+        hz = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0 < hz <= 100:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected 0 < HZ <= 100")
+    return hz
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="ramp-teleop",
+        description="Operator console in the browser for a RAMP robot: live status, every "
+                    "function, a gamepad with a dead-man button, and a STOP that always works.")
+    p.add_argument("--backend", default="127.0.0.1:5577", metavar="HOST:PORT",
+                   help="the robot's MCP address (default 127.0.0.1:5577)")
+    p.add_argument("--http-port", type=int, default=8080, metavar="P",
+                   help="port of the page on 127.0.0.1 (default 8080; 0 picks a free one)")
+    p.add_argument("--name", type=_name, default="operator",
+                   help="who takes control with 'Take control' (default operator)")
+    p.add_argument("--profile", default=DEFAULT_PROFILE, metavar="NAME",
+                   help="gamepad profile: a file NAME.yaml among the built-in profiles or in "
+                        "$XDG_CONFIG_HOME/ramp/profiles (default: default)")
+    p.add_argument("--poll-hz", type=_rate, default=10.0, metavar="HZ",
+                   help="status poll rate (default 10)")
+    p.add_argument("--battery", type=_battery, default=(17.0, 21.0), metavar="EMPTY:FULL",
+                   help="volts of an empty and a full battery for the gauge (default 17:21, "
+                        "MARTE's 5S LiPo rail)")
+    p.add_argument("-v", "--verbose", action="store_true", help="log link changes")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        host, port = parse_address(args.backend)
+    except ValueError as exc:
+        print(f"ramp-teleop: --backend: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    if not 0 <= args.http_port <= 65535:
+        print("ramp-teleop: --http-port must be 0-65535", file=sys.stderr)
+        return EXIT_USAGE
+    library = ProfileLibrary()
+    try:
+        profile = library.load(args.profile)
+    except ProfileError as exc:
+        print(f"ramp-teleop: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    try:
+        import uvicorn
+
+        from ramp.teleop.app import create_app
+        from ramp.teleop.console import Console
+    except ImportError as exc:
+        print(f"ramp-teleop: {exc.name} is missing; install the console's extra: "
+              "pip install 'ramp[teleop]'", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        sock = socket.create_server((HTTP_HOST, args.http_port))
+    except OSError as exc:
+        print(f"ramp-teleop: cannot serve on {HTTP_HOST}:{args.http_port}: {exc.strerror}",
+              file=sys.stderr)
+        return EXIT_USAGE
+    http_port = sock.getsockname()[1]
+    console = Console(host, port, name=args.name, library=library, profile=profile,
+                      poll_hz=args.poll_hz, battery=args.battery)
+    # ws="websockets-sansio": name the WebSocket implementation, so a missing library is an
+    # import error at start rather than uvicorn quietly answering every upgrade with 404.
+    config = uvicorn.Config(create_app(console), ws="websockets-sansio", lifespan="on",
+                            log_level="warning", timeout_graceful_shutdown=2)
+    server = uvicorn.Server(config)
+    # uvicorn shuts down gracefully on SIGINT/SIGTERM (the console stops what it moved), then
+    # raises the signal again to whatever handler was there before; this one makes that the
+    # end of it, so Ctrl-C and `kill` exit 0 without a traceback.
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda signum, frame: setattr(server, "should_exit", True))
+
+    async def serve() -> None:
+        task = asyncio.create_task(server.serve(sockets=[sock]))
+        while not server.started and not task.done():
+            await asyncio.sleep(0.01)
+        if server.started:
+            print(f"ramp-teleop: open http://{HTTP_HOST}:{http_port}/", flush=True)
+        await task
+
+    asyncio.run(serve())
+    return EXIT_OK
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,375 @@
+"""The console: pages on one side, the robot's two MCP links on the other, the controller between.
+
+Everything runs in one asyncio loop. Pages post JSON messages (inputs at ~20 Hz, calls,
+STOP, control, profile); the console answers each page and broadcasts the robot's status at
+the poll rate. The controller decides what motion goes out; this file only moves its
+messages and the robot's answers, and reads the loop's monotonic clock.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import functools
+import logging
+import math
+import re
+from collections.abc import Callable
+from typing import Any
+
+from ramp.mcp.describe import READ_FUNCTIONS, Catalog, error_text
+from ramp.mcp.messages import Request, Response
+from ramp.mcp.protocol import format_requests, parse_message
+from ramp.mcp.session import Reply
+from ramp.teleop.controller import Controller, Message, module_stop
+from ramp.teleop.mapping import PadState, intent_of
+from ramp.teleop.profile import Profile, ProfileError, ProfileLibrary
+from ramp.teleop.robot import Link, Status, StatusPoller, catalog_view
+
+log = logging.getLogger("ramp.teleop")
+
+TICK_S = 0.05
+CALL_TIMEOUT_S = 1.0
+STOP_ALL = "robot:robot.stop=()"
+_SPLIT_PARAMS = re.compile(r"[,\s]+")
+_MAX_KEYS = 16
+
+Sink = Callable[[dict[str, Any]], None]
+
+
+def call_text(target: str, params: str) -> str:
+    """`base:base.drive` and `50, 0` (commas or blanks) -> `base:base.drive=(50,0)`."""
+    parts = [p for p in _SPLIT_PARAMS.split(params.strip()) if p]
+    return f"{target}=({','.join(parts)})"
+
+
+def is_motion(r: Request) -> bool:
+    """A request that may set something moving on a module (and so needs a stop later).
+
+    Reads and stops never do; robot-level requests (watchdog, control) move nothing.
+    """
+    return r.module != "robot" and r.function not in READ_FUNCTIONS and r.function != "stop"
+
+
+def refused_modules(requests: list[Request], responses: list[Response]) -> set[str]:
+    """Modules whose requests in this message the robot refused (errors echo the module)."""
+    sent = {r.module for r in requests}
+    return {r.module for r in responses if r.prop == "error" and r.module in sent}
+
+
+def pad_from_json(data: Any) -> PadState | None:
+    """A pad the page read, if it has the standard mapping; None otherwise."""
+    if not isinstance(data, dict) or data.get("mapping") != "standard":
+        return None
+    axes_in, buttons_in = data.get("axes"), data.get("buttons")
+    if not isinstance(axes_in, list) or not isinstance(buttons_in, list):
+        return None
+    axes = tuple(_finite(a) for a in axes_in[:16])
+    values: list[float] = []
+    pressed: list[bool] = []
+    for b in buttons_in[:32]:
+        if isinstance(b, list | tuple) and len(b) == 2:
+            pressed.append(bool(b[0]))
+            values.append(_finite(b[1]))
+        else:
+            v = _finite(b)
+            pressed.append(v >= 0.5)
+            values.append(v)
+    return PadState(axes, tuple(values), tuple(pressed))
+
+
+def _finite(x: Any) -> float:
+    if isinstance(x, bool):
+        return float(x)
+    if isinstance(x, int | float) and math.isfinite(x):
+        return max(-1.0, min(1.0, float(x)))
+    return 0.0
+
+
+class Console:
+    """One operator station: the links, the controller, the open pages."""
+
+    def __init__(self, host: str, port: int, *, name: str, library: ProfileLibrary,
+                 profile: Profile, poll_hz: float = 10.0,
+                 battery: tuple[float, float] = (17.0, 21.0)) -> None:
+        self.host, self.port, self.name = host, port, name
+        self.library, self.profile = library, profile
+        self.poll_hz, self.battery = poll_hz, battery
+        self.status_link = Link(host, port, "status")
+        self.command_link = Link(host, port, "command", on_change=self._command_link_changed)
+        self.poller = StatusPoller(self.status_link, poll_hz, on_status=self._on_status,
+                                   on_catalog=self._on_catalog)
+        self.controller = Controller(stop_for=self._stop_for)
+        self.pages: dict[str, Sink] = {}
+        self._drive_views: dict[str, dict[str, object]] = {}
+        self._next_page = 0
+        self._tasks: list[asyncio.Task[None]] = []
+        self._loop: asyncio.AbstractEventLoop | None = None
+        #: The operator took control and has not handed it back: re-taken after a reconnect.
+        self.want_control = False
+        self._watchdog_state = ""
+
+    # -- lifecycle ------------------------------------------------------------------------------
+    def now(self) -> float:
+        assert self._loop is not None
+        return self._loop.time()
+
+    async def start(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._tasks = [
+            asyncio.create_task(self.status_link.run(), name="status link"),
+            asyncio.create_task(self.command_link.run(), name="command link"),
+            asyncio.create_task(self.poller.run(), name="status poller"),
+            asyncio.create_task(self._tick_loop(), name="controller tick"),
+        ]
+
+    async def stop(self) -> None:
+        """Stop what this console moved, then close both links."""
+        self._send(self.controller.halt(self.now(), "console shutting down"))
+        client = self.command_link.client
+        if client is not None and client.in_flight:
+            with contextlib.suppress(asyncio.TimeoutError, ConnectionError):
+                await asyncio.wait_for(client.heartbeat(), 0.5)
+        for task in self._tasks:
+            task.cancel()
+        for task in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        await self.command_link.close()
+        await self.status_link.close()
+
+    # -- pages ----------------------------------------------------------------------------------
+    def open_page(self, sink: Sink) -> str:
+        self._next_page += 1
+        page = str(self._next_page)
+        self.pages[page] = sink
+        self.controller.open_page(page, self.now())
+        sink(self.hello())
+        sink({"type": "catalog", "modules": catalog_view(self.poller.catalog,
+                                                          self.poller.status.states)})
+        sink(self.status_message(self.poller.status))
+        return page
+
+    def close_page(self, page: str) -> None:
+        self.pages.pop(page, None)
+        self._drive_views.pop(page, None)
+        self.controller.close_page(page, self.now())
+        self._run_tick()
+
+    def hello(self) -> dict[str, Any]:
+        return {"type": "hello", "name": self.name, "backend": f"{self.host}:{self.port}",
+                "poll_hz": self.poll_hz, "battery": list(self.battery),
+                "profiles": self.library.names(), "profile": self.profile.summary(),
+                "safety": {"stale_after": self.controller.stale_after,
+                           "focus_grace": self.controller.focus_grace}}
+
+    async def page_message(self, page: str, msg: Any) -> None:
+        """One message from a page; malformed ones are answered with an event, never fatal."""
+        if not isinstance(msg, dict) or page not in self.pages:
+            return
+        kind = msg.get("type")
+        now = self.now()
+        if kind == "input":
+            keys = [k for k in msg.get("keys", []) if isinstance(k, str)][:_MAX_KEYS] \
+                if isinstance(msg.get("keys"), list) else []
+            intent = intent_of(self.profile, pad_from_json(msg.get("pad")), keys)
+            self.controller.page_input(page, now, focused=bool(msg.get("focused", True)),
+                                       intent=intent)
+            self._run_tick()
+            return
+        self.controller.seen(page, now)
+        if kind == "stop":
+            await self.stop_all(page)
+        elif kind == "call":
+            await self.call(page, msg)
+        elif kind == "control":
+            await self.control(page, str(msg.get("action", "")))
+        elif kind == "profile":
+            self.switch_profile(page, str(msg.get("name", "")))
+        else:
+            self._post(page, {"type": "event", "level": "warning",
+                              "text": f"unknown page message {kind!r}"})
+
+    # -- operator actions -----------------------------------------------------------------------
+    async def stop_all(self, page: str) -> None:
+        """The big STOP: `robot:robot.stop=()` on whichever link is up, and latch."""
+        self.controller.interrupted(self.now(), "STOP pressed")
+        future = self.command_link.submit(STOP_ALL) or self.status_link.submit(STOP_ALL)
+        if future is None:
+            self._post(page, {"type": "result", "id": "stop", "ok": False,
+                              "text": "robot link down: STOP not sent"})
+            return
+        self._broadcast({"type": "event", "level": "stop", "text": "STOP sent"})
+        await self._answer(page, "stop", STOP_ALL, future)
+
+    async def call(self, page: str, msg: dict[str, Any]) -> None:
+        call_id = msg.get("id")
+        target, params = str(msg.get("target", "")), str(msg.get("params", ""))
+        text = call_text(target, params)
+        parsed = parse_message(text.encode("ascii", "replace"))
+        if parsed.syntax_error is not None or len(parsed.requests) != 1:
+            detail = error_text(parsed.syntax_error) if parsed.syntax_error else "one request"
+            self._post(page, {"type": "result", "id": call_id, "ok": False, "text": detail})
+            return
+        request = parsed.requests[0]
+        future = self.command_link.submit(request)
+        if future is None:
+            self._post(page, {"type": "result", "id": call_id, "ok": False,
+                              "text": "robot link down: not sent"})
+            return
+        rows = await self._answer(page, call_id, text, future)
+        if rows is None:
+            return
+        refused = refused_modules([request], rows)
+        if (request.module, request.device, request.function) == \
+                ("robot", "control", "acquire") and not refused:
+            self.want_control = True
+            self.controller.interrupted(self.now(), "control taken")
+        elif (request.module, request.device, request.function) == \
+                ("robot", "control", "release") and not refused:
+            self.want_control = False
+        elif request.function == "stop" and not refused:
+            if request.module == "robot":
+                self.controller.interrupted(self.now(), "robot stopped")
+            else:
+                self.controller.forget([request.module])
+        elif is_motion(request) and not refused:
+            self.controller.commanded(page, [request.module], self.now())
+
+    async def control(self, page: str, action: str) -> None:
+        if action == "acquire":
+            await self.call(page, {"id": "control", "target": "robot:control.acquire",
+                                   "params": self.name})
+        elif action == "release":
+            await self.call(page, {"id": "control", "target": "robot:control.release",
+                                   "params": ""})
+
+    def switch_profile(self, page: str, name: str) -> None:
+        try:
+            profile = self.library.load(name)
+        except ProfileError as exc:
+            self._post(page, {"type": "profile_error", "text": str(exc)})
+            return
+        self._send(self.controller.halt(self.now(), "profile switched"))
+        self.profile = profile
+        log.info("profile %s (%s)", profile.name, profile.source)
+        self._broadcast({"type": "profile", "profiles": self.library.names(),
+                         "profile": profile.summary()})
+
+    # -- robot side -----------------------------------------------------------------------------
+    def _stop_for(self, module: str) -> Request:
+        cat = self.poller.catalog
+        if cat.function(module, module, "stop") is not None or module not in cat.modules:
+            return module_stop(module)
+        return Request("robot", "robot", "stop")
+
+    def _command_link_changed(self, up: bool, detail: str) -> None:
+        self.controller.set_link(up, self.now())
+        self._broadcast({"type": "event", "level": "info" if up else "error",
+                         "text": f"command link {'up' if up else 'lost'}: {detail}"})
+        if up and self.want_control:
+            future = self.command_link.submit(f"robot:control.acquire=({self.name})")
+            if future is not None:
+                future.add_done_callback(self._reacquired)
+
+    def _reacquired(self, future: asyncio.Future[Reply[Any]]) -> None:
+        ok = not future.cancelled() and future.exception() is None
+        text = "control taken again after reconnecting" if ok else "could not take control again"
+        self._broadcast({"type": "event", "level": "info" if ok else "error", "text": text})
+
+    def _on_status(self, status: Status) -> None:
+        state = status.values.get("robot:watchdog.state", "")
+        if state == "tripped" and self._watchdog_state not in ("", "tripped"):
+            # A trip seen by a poll sent before our last motion may be an older one that our
+            # motion has already re-armed (polls and commands travel on different
+            # connections); a later one stopped us, and nothing resumes by itself.
+            fresh = status.sent_at is not None and \
+                status.sent_at > self.controller.last_motion_at + 0.05
+            if fresh:
+                self.controller.interrupted(self.now(), "watchdog tripped")
+        self._watchdog_state = state
+        self._broadcast(self.status_message(status))
+        self._push_drive_views()
+
+    def _on_catalog(self, catalog: Catalog) -> None:
+        self._broadcast({"type": "catalog",
+                         "modules": catalog_view(catalog, self.poller.status.states)})
+
+    def status_message(self, status: Status) -> dict[str, Any]:
+        owner = status.values.get("robot:control.owner", "")
+        return {"type": "status", **status.view(),
+                "command_link": {"up": self.command_link.up,
+                                 "detail": self.command_link.detail},
+                "control": {"owner": owner, "mine": self.want_control and owner == self.name,
+                            "want": self.want_control}}
+
+    # -- the tick -------------------------------------------------------------------------------
+    async def _tick_loop(self) -> None:
+        while True:
+            try:
+                self._run_tick()
+            except Exception:  # a bug here must not end the ticks that stop a dead page
+                log.exception("controller tick failed")
+            await asyncio.sleep(TICK_S)
+
+    def _run_tick(self) -> None:
+        self._send(self.controller.tick(self.now()))
+        self._push_drive_views()
+
+    def _send(self, messages: list[Message]) -> None:
+        for message in messages:
+            future = self.command_link.submit(message)
+            if future is None:
+                continue
+            if message:
+                future.add_done_callback(functools.partial(self._check_motion_reply, message))
+
+    def _check_motion_reply(self, message: Message, future: asyncio.Future[Reply[Any]]) -> None:
+        if future.cancelled() or future.exception() is not None:
+            return
+        try:
+            rows = future.result().responses()
+        except Exception:  # a garbled answer: the link's reader will report the connection
+            return
+        refused = refused_modules(message, rows)
+        if refused:
+            self.controller.forget(refused)
+            errors = "; ".join(f"{r.module}:{r.device} {error_text(r)}" for r in rows
+                               if r.prop == "error")
+            self._broadcast({"type": "event", "level": "error",
+                             "text": f"refused {format_requests(message).decode().strip()}: "
+                                     f"{errors}"})
+
+    def _push_drive_views(self) -> None:
+        now = self.now()
+        for page in list(self.pages):
+            view = self.controller.page_view(page, now)
+            if view != self._drive_views.get(page):
+                self._drive_views[page] = view
+                self._post(page, {"type": "drive", **view})
+
+    # -- output ---------------------------------------------------------------------------------
+    async def _answer(self, page: str, call_id: Any, text: str,
+                      future: asyncio.Future[Reply[Any]]) -> list[Response] | None:
+        try:
+            reply = await asyncio.wait_for(asyncio.shield(future), CALL_TIMEOUT_S)
+            rows = reply.responses()
+        except Exception as exc:  # timeout, lost link, garbled answer: shown to the operator
+            self._post(page, {"type": "result", "id": call_id, "ok": False, "request": text,
+                              "text": f"{type(exc).__name__}: {exc}"})
+            return None
+        errors = [r for r in rows if r.prop == "error"]
+        shown = "; ".join(f"{r.module}:{r.device}.{r.prop}=({','.join(map(str, r.values))})"
+                          for r in rows if r.prop != "error")
+        self._post(page, {"type": "result", "id": call_id, "request": text, "ok": not errors,
+                          "text": "; ".join(error_text(r) for r in errors) or shown or "ok"})
+        return rows
+
+    def _post(self, page: str, message: dict[str, Any]) -> None:
+        sink = self.pages.get(page)
+        if sink is not None:
+            sink(message)
+
+    def _broadcast(self, message: dict[str, Any]) -> None:
+        for sink in list(self.pages.values()):
+            sink(message)

@@ -1,0 +1,497 @@
+// RAMP teleop page. It talks only to ramp-teleop over one WebSocket: it sends what the operator
+// does (inputs ~20 times a second, calls, STOP) and draws what the console tells it. Everything
+// it shows about the robot comes from the robot's own describe answers, never from tables here.
+// The page decides nothing about safety: ramp-teleop gates every motion on this page being
+// connected, fresh and focused, so a frozen or closed page stops the robot.
+"use strict";
+(() => {
+  const INPUT_PERIOD_MS = 50;
+  const RECONNECT_MS = 1000;
+  const RESULT_SHOW_MS = 6000;
+  const DRIVE_KEYS = new Set(["w", "a", "s", "d"]);
+  const $ = (id) => document.getElementById(id);
+
+  const st = {
+    ws: null,
+    connected: false,
+    hello: null,
+    modules: [],
+    status: null,
+    drive: {},
+    values: new Map(), // "module:device.prop" -> element showing it
+    keys: new Set(),
+    pad: null,
+    padNote: "none detected (press a button)",
+    callId: 0,
+    calls: new Map(), // id -> result element
+  };
+
+  // ---- helpers --------------------------------------------------------------------------
+  function el(tag, attrs = {}, ...children) {
+    const e = document.createElement(tag);
+    for (const [k, v] of Object.entries(attrs)) {
+      if (v === undefined || v === null || v === false) continue;
+      if (k === "class") e.className = v;
+      else if (k === "text") e.textContent = v;
+      else if (k.startsWith("on")) e.addEventListener(k.slice(2), v);
+      else e.setAttribute(k, v === true ? "" : String(v));
+    }
+    for (const c of children) if (c !== null && c !== undefined) e.append(c);
+    return e;
+  }
+  function setClass(e, cls, on) { if (e) e.classList.toggle(cls, !!on); }
+  function setState(e, state, names) {
+    if (!e) return;
+    for (const n of names) e.classList.remove(n);
+    if (state) e.classList.add(state);
+  }
+  const STATE_CLASSES = ["ok", "bad", "warn", "drive", "fault", "detached"];
+  function stateClass(s) { return s === "ok" ? "ok" : s === "fault" ? "fault" : s === "detached" ? "detached" : ""; }
+  function value(key) { return st.status && st.status.values ? st.status.values[key] : undefined; }
+  function nowText() { return new Date().toLocaleTimeString(); }
+  function event(level, text) {
+    const list = $("events");
+    list.prepend(el("li", { class: level }, el("time", { text: nowText() }), text));
+    while (list.children.length > 60) list.lastChild.remove();
+  }
+
+  // ---- WebSocket ------------------------------------------------------------------------
+  function connect() {
+    const proto = location.protocol === "https:" ? "wss" : "ws";
+    const ws = new WebSocket(`${proto}://${location.host}/ws`);
+    st.ws = ws;
+    ws.onopen = () => { st.connected = true; refreshBanner(); refreshConnection(); sendInput(); };
+    ws.onmessage = (ev) => {
+      let msg;
+      try { msg = JSON.parse(ev.data); } catch (e) { return; }
+      handle(msg);
+    };
+    ws.onclose = () => {
+      if (st.ws === ws) st.ws = null;
+      if (st.connected) event("error", "lost the console (ramp-teleop); retrying");
+      st.connected = false;
+      refreshPills();
+      refreshBanner();
+      refreshConnection();
+      setTimeout(connect, RECONNECT_MS);
+    };
+  }
+  function send(obj) {
+    if (st.ws && st.ws.readyState === WebSocket.OPEN) {
+      st.ws.send(JSON.stringify(obj));
+      return true;
+    }
+    return false;
+  }
+
+  function handle(msg) {
+    switch (msg.type) {
+      case "hello": onHello(msg); break;
+      case "catalog": renderModules(msg.modules || []); break;
+      case "status": onStatus(msg); break;
+      case "drive": st.drive = msg; refreshDrive(); break;
+      case "result": onResult(msg); break;
+      case "event": event(msg.level || "info", msg.text || ""); break;
+      case "profile": onProfile(msg.profiles, msg.profile); break;
+      case "profile_error": onProfileError(msg.text); break;
+      default: break;
+    }
+  }
+
+  // ---- hello, profile -------------------------------------------------------------------
+  function onHello(msg) {
+    st.hello = msg;
+    $("backend").textContent = `robot ${msg.backend} · operator ${msg.name}`;
+    $("conn-backend").textContent = msg.backend;
+    onProfile(msg.profiles, msg.profile);
+  }
+  function onProfile(names, profile) {
+    if (st.hello) { st.hello.profile = profile; st.hello.profiles = names; }
+    const sel = $("profile");
+    sel.replaceChildren(...(names || []).map((n) => el("option", { value: n, text: n })));
+    sel.value = profile.name;
+    $("profile-description").textContent = `${profile.description || ""} (${profile.source})`;
+    $("mapping").replaceChildren(...profile.rows.map((r) =>
+      el("tr", {}, el("td", { text: r.input }), el("td", { text: r.does }))));
+    $("profile-error").classList.add("hidden");
+    refreshConnection();
+  }
+  function onProfileError(text) {
+    const e = $("profile-error");
+    e.textContent = text;
+    e.classList.remove("hidden");
+    if (st.hello) $("profile").value = st.hello.profile.name;
+    event("error", `profile: ${text}`);
+  }
+
+  // ---- modules: tree and panels ---------------------------------------------------------
+  function renderModules(modules) {
+    // Keep what the operator typed across a rebuild (a module attached or faulted).
+    const typed = new Map();
+    document.querySelectorAll("input[data-testid^='call:']").forEach((i) => typed.set(i.dataset.testid, i.value));
+    st.modules = modules;
+    st.values = new Map();
+    const ordered = [...modules.filter((m) => m.name !== "robot"), ...modules.filter((m) => m.name === "robot")];
+    $("tree").replaceChildren(...ordered.map(treeItem));
+    $("modules").replaceChildren(...ordered.map(modulePanel));
+    document.querySelectorAll("input[data-testid^='call:']").forEach((i) => {
+      if (typed.has(i.dataset.testid)) i.value = typed.get(i.dataset.testid);
+    });
+    renderBatteries();
+    if (st.status) onStatus(st.status);
+  }
+
+  function treeItem(m) {
+    const dot = el("span", { class: "dot-state", "data-module-dot": m.name });
+    return el("li", { role: "treeitem", "aria-expanded": "true", "data-testid": `tree:${m.name}` },
+      el("a", { class: "tree-module", href: `#mod-${m.name}` }, dot, m.name),
+      el("ul", { role: "group" }, ...m.devices.map((d) =>
+        el("li", { role: "treeitem", class: "tree-device", "data-testid": `tree:${m.name}:${d.name}` },
+          el("a", { href: `#dev-${m.name}-${d.name}` }, d.name)))));
+  }
+
+  function modulePanel(m) {
+    const panel = el("article", { class: "card module", id: `mod-${m.name}`, "data-module": m.name },
+      el("div", { class: "module-head" },
+        el("h3", { text: m.name }),
+        el("span", { class: "badge", "data-module-badge": m.name, text: m.name === "robot" ? "supervisor" : m.state })),
+      el("p", { class: "module-problem hidden", "data-module-problem": m.name }));
+    for (const d of m.devices) panel.append(devicePanel(m.name, d));
+    return panel;
+  }
+
+  function devicePanel(module, d) {
+    const body = el("div", { class: "device-body" });
+    if (d.properties.length) {
+      const props = el("div", { class: "props" });
+      for (const p of d.properties) {
+        const key = `${module}:${d.name}.${p.name}`;
+        const v = el("span", { class: "prop-value", "data-testid": `value:${key}` });
+        st.values.set(key, v);
+        props.append(el("div", { class: "prop", title: `${key} (${p.type || "?"})` },
+          el("span", { class: "prop-name", text: p.name }), v,
+          p.unit ? el("span", { class: "prop-unit", text: p.unit }) : null));
+      }
+      body.append(props);
+    }
+    if (d.functions.length) {
+      const fns = el("div", { class: "fns" });
+      for (const f of d.functions) fns.append(functionControl(module, d.name, f));
+      body.append(fns);
+    }
+    return el("div", { class: "device", id: `dev-${module}-${d.name}` },
+      el("div", { class: "device-name", text: d.name }), body);
+  }
+
+  function functionControl(module, device, f) {
+    const target = `${module}:${device}.${f.name}`;
+    const result = el("span", { class: "fn-result", "aria-live": "polite" });
+    if (!f.params.length) {
+      const b = el("button", { type: "button", class: `call${f.name === "stop" ? " stop-fn" : ""}`,
+        "data-testid": `call:${target}`, title: `${target}=()`, text: f.name,
+        onclick: () => sendCall(target, "", result) });
+      return el("span", { class: "fn" }, b, result);
+    }
+    const id = `in-${module}-${device}-${f.name}`;
+    const input = el("input", { id, type: "text", inputmode: "decimal", autocomplete: "off",
+      spellcheck: "false", "data-testid": `call:${target}`, placeholder: f.params.join(", "),
+      title: `${target}=(${f.params.join(", ")}); Enter sends`, class: f.params.length > 1 ? "wide" : "" });
+    if (target === "robot:control.acquire" && st.hello) input.value = st.hello.name;
+    input.addEventListener("keydown", (e) => {
+      if (e.key === "Enter") { e.preventDefault(); sendCall(target, input.value, result); }
+    });
+    const wrap = el("span", { class: "fn" },
+      el("label", { for: id, text: f.name }), input,
+      el("button", { type: "button", class: "send", title: "send", "aria-label": `send ${target}`,
+        text: "▶", onclick: () => sendCall(target, input.value, result) }));
+    for (const p of presets(f.params)) {
+      wrap.append(el("button", { type: "button", class: "preset", title: `${target}=(${p})`, text: p,
+        onclick: () => { input.value = p; sendCall(target, p, result); } }));
+    }
+    wrap.append(result);
+    return wrap;
+  }
+
+  // A single float parameter over a short range (a position, say): quarter-step presets.
+  function presets(params) {
+    if (params.length !== 1) return [];
+    const m = /^float\s+(-?[\d.]+)\.\.(-?[\d.]+)$/.exec(params[0].trim());
+    if (!m) return [];
+    const lo = Number(m[1]), hi = Number(m[2]);
+    if (!(hi > lo) || hi - lo > 10) return [];
+    return [0, 0.25, 0.5, 0.75, 1].map((q) => String(Math.round((lo + q * (hi - lo)) * 1000) / 1000));
+  }
+
+  function sendCall(target, params, resultEl) {
+    const id = ++st.callId;
+    st.calls.set(id, resultEl);
+    if (!send({ type: "call", id, target, params })) {
+      showResult(resultEl, false, "console not connected");
+      return;
+    }
+    resultEl.textContent = "…";
+    resultEl.className = "fn-result";
+  }
+  function onResult(msg) {
+    if (msg.id === "stop") {
+      if (!msg.ok) event("error", `STOP: ${msg.text}`);
+      return;
+    }
+    if (msg.id === "control") {
+      event(msg.ok ? "info" : "error", `${msg.request}: ${msg.text}`);
+      return;
+    }
+    const resultEl = st.calls.get(msg.id);
+    st.calls.delete(msg.id);
+    if (resultEl) showResult(resultEl, msg.ok, msg.text);
+    if (!msg.ok) event("error", `${msg.request || "call"}: ${msg.text}`);
+  }
+  function showResult(e, ok, text) {
+    e.textContent = text;
+    e.className = `fn-result ${ok ? "ok" : "bad"}`;
+    const shown = text;
+    setTimeout(() => { if (e.textContent === shown) { e.textContent = ""; e.className = "fn-result"; } }, RESULT_SHOW_MS);
+  }
+
+  // ---- status ---------------------------------------------------------------------------
+  function onStatus(msg) {
+    st.status = msg;
+    for (const [key, text] of Object.entries(msg.values || {})) {
+      const e = st.values.get(key);
+      if (e && e.textContent !== text) e.textContent = text;
+    }
+    for (const m of st.modules) {
+      if (m.name === "robot") continue;
+      const s = (msg.states || {})[m.name] || m.state || "unknown";
+      const panel = document.querySelector(`[data-module="${m.name}"]`);
+      setState(panel, stateClass(s), STATE_CLASSES);
+      setClass(panel, "stale", s !== "ok" || !msg.reachable);
+      const badge = document.querySelector(`[data-module-badge="${m.name}"]`);
+      if (badge) { badge.textContent = s; setState(badge, stateClass(s), STATE_CLASSES); }
+      setState(document.querySelector(`[data-module-dot="${m.name}"]`), stateClass(s), STATE_CLASSES);
+      const problem = document.querySelector(`[data-module-problem="${m.name}"]`);
+      const text = (msg.errors || {})[m.name] || m.problem || "";
+      if (problem) { problem.textContent = text; setClass(problem, "hidden", !text); }
+    }
+    const robotPanel = document.querySelector(`[data-module="robot"]`);
+    setState(robotPanel, msg.reachable ? "ok" : "fault", STATE_CLASSES);
+    setState(document.querySelector(`[data-module-dot="robot"]`), msg.reachable ? "ok" : "fault", STATE_CLASSES);
+    refreshPills();
+    refreshHealth();
+    refreshBatteries();
+    refreshConnection();
+    refreshBanner();
+  }
+
+  function refreshPills() {
+    const s = st.status;
+    const link = $("pill-link");
+    if (!st.connected) { link.textContent = "console lost"; setState(link, "bad", STATE_CLASSES); }
+    else if (!s || !s.reachable) { link.textContent = "robot link lost"; setState(link, "bad", STATE_CLASSES); }
+    else { link.textContent = `link ok ${s.rtt_ms != null ? s.rtt_ms.toFixed(1) + " ms" : ""}`; setState(link, "ok", STATE_CLASSES); }
+    const wd = value("robot:watchdog.state") || "?";
+    const pw = $("pill-watchdog");
+    pw.textContent = `watchdog ${wd}`;
+    setState(pw, wd === "tripped" ? "warn" : wd === "armed" ? "drive" : wd === "idle" ? "ok" : "", STATE_CLASSES);
+    const owner = value("robot:control.owner") || "?";
+    const pc = $("pill-control");
+    const mine = s && s.control && s.control.mine;
+    pc.textContent = owner === "none" ? "control free" : `control: ${owner}${mine ? " (you)" : ""}`;
+    setState(pc, mine ? "drive" : owner === "none" ? "" : "warn", STATE_CLASSES);
+    $("take-control").disabled = !!mine;
+    $("hand-back").disabled = !(s && s.control && s.control.want);
+  }
+
+  function fact(dl, name, text, cls) {
+    dl.append(el("dt", { text: name }), el("dd", { class: cls || "", text }));
+  }
+  function refreshHealth() {
+    const dl = $("health");
+    dl.replaceChildren();
+    const v = (k) => value(k);
+    const late = (v("robot:tick.late") || "").split(",");
+    fact(dl, "uptime", v("robot:robot.uptime") ? `${Number(v("robot:robot.uptime")).toFixed(0)} s` : "–");
+    fact(dl, "tick rate", v("robot:tick.rate") ? `${v("robot:tick.rate")} Hz` : "–");
+    fact(dl, "late p50/p99/max", late.length === 3 ? `${late[0]} / ${late[1]} / ${late[2]} µs` : "–",
+      late.length === 3 && Number(late[1]) > 5000 ? "warn" : "");
+    const over = v("robot:tick.overruns");
+    fact(dl, "overruns", over ?? "–", over && Number(over) > 0 ? "warn" : "ok");
+    const wd = v("robot:watchdog.state");
+    fact(dl, "watchdog", wd ? `${wd} (${v("robot:watchdog.timeout") || "?"} s)` : "–",
+      wd === "tripped" ? "warn" : wd === "armed" ? "drive" : "ok");
+    const owner = v("robot:control.owner");
+    fact(dl, "control owner", owner ?? "–", owner && owner !== "none" ? "warn" : "");
+    fact(dl, "clients", v("robot:clients.count") ?? "–");
+    const states = (st.status && st.status.states) || {};
+    for (const [m, s] of Object.entries(states)) {
+      fact(dl, `module ${m}`, s, s === "ok" ? "ok" : s === "fault" ? "bad" : "warn");
+    }
+  }
+
+  // Every property the robot reports in volts gets a gauge.
+  function renderBatteries() {
+    const box = $("batteries");
+    const gauges = [];
+    for (const m of st.modules) for (const d of m.devices) for (const p of d.properties) {
+      if (p.unit === "V") {
+        const key = `${m.name}:${d.name}.${p.name}`;
+        gauges.push(el("div", { class: "gauge", "data-gauge": key },
+          el("div", { class: "gauge-label" }, el("span", { text: `${m.name} ${d.name}` }),
+            el("span", { class: "gauge-volts" })),
+          el("div", { class: "gauge-bar" }, el("div", { class: "gauge-fill", style: "width:0%" }))));
+      }
+    }
+    if (gauges.length) box.replaceChildren(...gauges);
+  }
+  function refreshBatteries() {
+    const [empty, full] = (st.hello && st.hello.battery) || [17, 21];
+    document.querySelectorAll("[data-gauge]").forEach((g) => {
+      const text = value(g.dataset.gauge);
+      const volts = Number(text);
+      const fill = g.querySelector(".gauge-fill");
+      if (text === undefined || !Number.isFinite(volts)) { g.querySelector(".gauge-volts").textContent = "–"; return; }
+      const pct = Math.max(0, Math.min(100, (100 * (volts - empty)) / (full - empty)));
+      g.querySelector(".gauge-volts").textContent = `${volts.toFixed(2)} V · ${pct.toFixed(0)} %`;
+      fill.style.width = `${pct}%`;
+      setState(fill, pct < 20 ? "bad" : pct < 50 ? "warn" : "", ["bad", "warn"]);
+    });
+  }
+
+  function refreshConnection() {
+    const s = st.status;
+    const set = (id, text, cls) => { const e = $(id); e.textContent = text; setState(e, cls, STATE_CLASSES); };
+    set("conn-console", st.connected ? "connected" : "lost: ramp-teleop not reachable", st.connected ? "ok" : "bad");
+    if (s) {
+      set("conn-reachable", s.reachable ? "yes" : `no: ${s.detail}`, s.reachable ? "ok" : "bad");
+      set("conn-rtt", s.rtt_ms != null ? `${s.rtt_ms.toFixed(2)} ms` : "–", "");
+      const c = s.command_link || {};
+      set("conn-command", c.up ? "up" : `down: ${c.detail || ""}`, c.up ? "ok" : "bad");
+    }
+    const profile = st.hello && st.hello.profile ? st.hello.profile.name : "?";
+    set("conn-gamepad", st.pad ? `${st.pad.id.slice(0, 40)} · standard mapping · profile ${profile}` : st.padNote, st.pad ? "ok" : "");
+  }
+
+  function refreshBanner() {
+    const b = $("banner");
+    let text = "", cls = "";
+    const s = st.status;
+    if (!st.connected) { text = "CONSOLE DISCONNECTED: ramp-teleop is not reachable. The robot stops by itself (watchdog)."; cls = "bad"; }
+    else if (s && !s.reachable) { text = `ROBOT LINK LOST (${s.detail}). Reconnecting; motion will not resume by itself.`; cls = "bad"; }
+    else if (s) {
+      const faults = Object.entries(s.states || {}).filter(([, v]) => v === "fault").map(([m]) => m);
+      if (faults.length) { text = `MODULE FAULT: ${faults.join(", ")}; its motion is stopped.`; cls = "bad"; }
+      else if (value("robot:watchdog.state") === "tripped") { text = "WATCHDOG TRIPPED: every module stopped. Motion resumes only on a new command."; cls = "warn"; }
+    }
+    b.textContent = text;
+    b.className = `banner ${cls}${text ? "" : " hidden"}`;
+  }
+
+  function refreshDrive() {
+    const d = st.drive || {};
+    const pill = $("pill-drive");
+    const text = $("drive-text");
+    let label = "idle", cls = "";
+    if (d.engaged) { label = `DRIVING · ${d.source}`; cls = "drive"; }
+    else if (d.latched) { label = "LATCHED · release the dead-man"; cls = "warn"; }
+    else if (d.outstanding && d.outstanding.length) { label = `HOLDING · ${d.outstanding.join(", ")}`; cls = "drive"; }
+    else if (d.live === false) { label = "page not live"; cls = "warn"; }
+    pill.textContent = label;
+    setState(pill, cls, STATE_CLASSES);
+    text.textContent = label;
+    setState(text, cls, STATE_CLASSES);
+    $("drive-note").textContent = d.note || (d.engaged ? "" : "hold the dead-man (LB) or W/A/S/D to drive");
+  }
+
+  // ---- inputs: gamepad, keys, focus -----------------------------------------------------
+  function readPad() {
+    let pads = [];
+    try { pads = navigator.getGamepads ? Array.from(navigator.getGamepads() || []) : []; } catch (e) { pads = []; }
+    let std = null, other = null;
+    for (const p of pads) {
+      if (!p || p.connected === false) continue;
+      if (p.mapping === "standard") { if (!std) std = p; } else if (!other) other = p;
+    }
+    if (!std) {
+      st.pad = null;
+      st.padNote = other ? `${other.id}: mapping "${other.mapping || "none"}" is not standard, not used` : "none detected (press a button)";
+      return null;
+    }
+    const pad = {
+      mapping: "standard",
+      id: String(std.id || "gamepad"),
+      axes: Array.from(std.axes || []).map((a) => Number(a) || 0),
+      buttons: Array.from(std.buttons || []).map((b) => (typeof b === "number" ? [b >= 0.5, b]
+        : [!!(b && b.pressed), Number(b && b.value !== undefined ? b.value : (b && b.pressed ? 1 : 0)) || 0])),
+    };
+    st.pad = pad;
+    return pad;
+  }
+  function focused() { return document.hasFocus() && document.visibilityState !== "hidden"; }
+  function sendInput() {
+    const pad = readPad();
+    send({ type: "input", focused: focused(), pad, keys: [...st.keys] });
+    drawStick(pad);
+  }
+  function drawStick(pad) {
+    const dot = $("stick-dot");
+    const x = pad ? pad.axes[0] || 0 : 0, y = pad ? pad.axes[1] || 0 : 0;
+    dot.style.left = `${34 + 30 * Math.max(-1, Math.min(1, x))}px`;
+    dot.style.top = `${34 + 30 * Math.max(-1, Math.min(1, y))}px`;
+    setClass(dot, "live", !!(st.drive && st.drive.engaged));
+  }
+
+  function isTyping(target) {
+    return target && (target.tagName === "INPUT" || target.tagName === "TEXTAREA" || target.tagName === "SELECT");
+  }
+  function isSpace(e) { return e.code === "Space" || e.key === " " || e.key === "Spacebar"; }
+
+  function stopNow() {
+    const b = $("stop");
+    b.classList.add("flash");
+    setTimeout(() => b.classList.remove("flash"), 200);
+    st.keys.clear();
+    if (!send({ type: "stop" })) event("error", "STOP not delivered: the console is not connected (the robot's watchdog stops it)");
+  }
+
+  window.addEventListener("keydown", (e) => {
+    if (isSpace(e)) {
+      // Space is STOP wherever the focus is: never a character, never a button press.
+      e.preventDefault();
+      e.stopPropagation();
+      if (!e.repeat) stopNow();
+      return;
+    }
+    const key = (e.key || "").toLowerCase();
+    if (key === "shift") { st.keys.add("shift"); return; }
+    if (DRIVE_KEYS.has(key) && !isTyping(e.target) && !e.ctrlKey && !e.altKey && !e.metaKey) {
+      e.preventDefault();
+      if (!st.keys.has(key)) { st.keys.add(key); sendInput(); }
+    }
+  }, true);
+  window.addEventListener("keyup", (e) => {
+    if (isSpace(e)) { e.preventDefault(); e.stopPropagation(); return; }
+    const key = (e.key || "").toLowerCase();
+    if (st.keys.delete(key)) sendInput();
+  }, true);
+  window.addEventListener("blur", () => { st.keys.clear(); sendInput(); });
+  window.addEventListener("focus", sendInput);
+  document.addEventListener("visibilitychange", () => { st.keys.clear(); sendInput(); });
+  window.addEventListener("gamepadconnected", (e) => {
+    const pad = e && e.gamepad;
+    event("info", `gamepad connected${pad && pad.id ? ": " + pad.id : ""}`);
+    sendInput();
+    refreshConnection();
+  });
+  window.addEventListener("gamepaddisconnected", () => { event("warning", "gamepad disconnected"); sendInput(); refreshConnection(); });
+
+  $("stop").addEventListener("click", stopNow);
+  $("take-control").addEventListener("click", () => send({ type: "control", action: "acquire" }));
+  $("hand-back").addEventListener("click", () => send({ type: "control", action: "release" }));
+  $("profile").addEventListener("change", (e) => send({ type: "profile", name: e.target.value }));
+
+  setInterval(() => { sendInput(); }, INPUT_PERIOD_MS);
+  setInterval(refreshConnection, 500);
+  refreshDrive();
+  refreshBanner();
+  connect();
+})();
