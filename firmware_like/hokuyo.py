@@ -85,9 +85,33 @@ def _line(content: bytes) -> bytes:
     return content + _sum(content) + b"\n"
 
 
-def _encode(values: npt.NDArray[np.int64], width: int) -> bytes:
-    shifts = np.array([6 * (width - 1 - i) for i in range(width)], dtype=np.int64)
-    return (((values[:, None] >> shifts) & 0x3F) + 0x30).astype(np.uint8).tobytes()
+def _encode_chars(values: npt.NDArray[np.int64], width: int) -> npt.NDArray[np.uint8]:
+    v = values.astype(np.int32)
+    out = np.empty((len(v), width), dtype=np.uint8)
+    for i in range(width):
+        out[:, i] = (v >> (6 * (width - 1 - i))) & 0x3F
+    out += 0x30
+    return out.ravel()
+
+
+def _encode_one(value: int, width: int) -> bytes:
+    return bytes(((value >> (6 * (width - 1 - i))) & 0x3F) + 0x30 for i in range(width))
+
+
+def _data_block(chars: npt.NDArray[np.uint8]) -> bytes:
+    """Scan data cut every 64 characters, each line with its sum and LF (all lines at once)."""
+    full, rest = divmod(len(chars), 64)
+    out = b""
+    if full:
+        grid = chars[:full * 64].reshape(full, 64)
+        block = np.empty((full, 66), dtype=np.uint8)
+        block[:, :64] = grid
+        block[:, 64] = (grid.sum(axis=1, dtype=np.int64) & 0x3F) + 0x30
+        block[:, 65] = 0x0A
+        out = block.tobytes()
+    if rest:
+        out += _line(chars[full * 64:].tobytes())
+    return out
 
 
 def _reply(echo: str, status: str, body: bytes = b"") -> bytes:
@@ -384,16 +408,14 @@ class HokuyoSensor:
         width = 3 if code[1] == "D" else 2
         if width == 2:
             data = np.minimum(data, 4095)
-        body = _encode(data, width)
-        lines = [_line(_encode(np.array([self.timestamp(start)], dtype=np.int64), 4))]
-        lines += [_line(body[i:i + 64]) for i in range(0, len(body), 64)]
-        if self.corrupt_next > 0:
+        stamp = _line(_encode_one(self.timestamp(start), 4))
+        body = _data_block(_encode_chars(data, width))
+        if self.corrupt_next > 0:  # spoil the last line's sum
             self.corrupt_next -= 1
             self.counters.corrupted += 1
-            last_line = lines[-1]
-            spoiled = (last_line[-2] - 0x30 + 1) % 64 + 0x30
-            lines[-1] = last_line[:-2] + bytes((spoiled,)) + b"\n"
-        self._emit(_reply(echo, status, b"".join(lines)))
+            spoiled = (body[-2] - 0x30 + 1) % 64 + 0x30
+            body = body[:-2] + bytes((spoiled,)) + b"\n"
+        self._emit(_reply(echo, status, stamp + body))
         self.counters.scans_sent += 1
 
     def _cluster(self, data: npt.NDArray[np.int64], cluster: int) -> npt.NDArray[np.int64]:
@@ -489,7 +511,7 @@ class HokuyoSensor:
                 ERROR: "006 Error"}.get(self.state, "000 Idle")
         stat = (f"Error {self.error_code:03d} hardware trouble" if self.state == ERROR
                 else "Stable 000 no error.")
-        stamp = _encode(np.array([self.timestamp(t)], dtype=np.int64), 4).decode("ascii")
+        stamp = _encode_one(self.timestamp(t), 4).decode("ascii")
         self._key_values(line, [("MODL", self.model.model),
                                 ("LASR", "ON" if self.laser_on else "OFF"),
                                 ("SCSP", f"Initial({self.model.scan_rpm}[rpm])"),
@@ -564,8 +586,7 @@ class HokuyoSensor:
             else:
                 self._emit(_reply(line, "02" if self.state == TIME_ADJUST else "10"))
         elif control == "1":
-            stamp = _encode(np.array([self.timestamp(t)], dtype=np.int64), 4)
-            self._emit(_reply(line, "00", _line(stamp)))
+            self._emit(_reply(line, "00", _line(_encode_one(self.timestamp(t), 4))))
         elif control == "2":
             if self.state == TIME_ADJUST:
                 self.state = IDLE

@@ -186,13 +186,18 @@ def decode_values(data: bytes, width: int) -> IntArray:
     if len(data) % width:
         raise ScipError(f"{len(data)} data characters is not a whole number of "
                         f"{width}-character values")
-    raw = np.frombuffer(data, dtype=np.uint8)
-    if raw.size and (raw.min() < 0x30 or raw.max() > 0x6F):
+    return _decode_chars(np.frombuffer(data, dtype=np.uint8), width)
+
+
+_WEIGHTS = {w: np.array([1 << 6 * (w - 1 - i) for i in range(w)], dtype=np.int64)
+            for w in (2, 3, 4)}
+
+
+def _decode_chars(raw: npt.NDArray[np.uint8], width: int) -> IntArray:
+    six = raw - np.uint8(0x30)  # below 0x30 wraps round to 0xD0 and above
+    if six.size and six.max() > 0x3F:
         raise ScipError("data contains characters outside 0x30-0x6F")
-    six = (raw.astype(np.int64) - 0x30).reshape(-1, width)
-    out = six[:, 0]
-    for i in range(1, width):
-        out = (out << 6) | six[:, i]
+    out: IntArray = six.reshape(-1, width) @ _WEIGHTS[width]
     return out
 
 
@@ -489,27 +494,48 @@ def _decode_scan(echo: str, status: str, payload: list[bytes], raw: bytes) -> De
                         echo, raw, 2)
     if not line_sum_ok(stamp):
         return BadReply("checksum", f"timestamp line {stamp!r} fails its sum", echo, raw, 2)
-    body = bytearray()
-    last = len(payload) - 1
-    for i, line in enumerate(payload[1:], start=3):
-        chars = len(line) - 1
-        if chars < 1 or chars > DATA_LINE_CHARS or (i - 2 < last and chars != DATA_LINE_CHARS):
-            return BadReply("garbled", f"data line of {chars} characters (lines are cut every "
-                            f"{DATA_LINE_CHARS})", echo, raw, i)
-        if not line_sum_ok(line):
-            return BadReply("checksum", f"data line {line!r} fails its sum", echo, raw, i)
-        body += line[:-1]
+    chars = _data_chars(payload[1:])
+    if isinstance(chars, tuple):
+        kind, reason, line = chars
+        return BadReply(kind, reason, echo, raw, line)
     expected = req.count * req.width
-    if len(body) != expected:
-        kind = "truncated" if len(body) < expected else "garbled"
-        return BadReply(kind, f"{len(body)} data characters, {expected} expected for "
+    if chars.size != expected:
+        kind = "truncated" if chars.size < expected else "garbled"
+        return BadReply(kind, f"{chars.size} data characters, {expected} expected for "
                         f"{req.count} steps of {req.width} characters", echo, raw, -1)
     try:
         stamp_ms = decode_int(stamp[:4])
-        values = decode_values(bytes(body), req.width)
+        values = _decode_chars(chars, req.width)
     except ScipError as exc:
         return BadReply("garbled", str(exc), echo, raw, -1)
     return Reply(echo, status, request=req, timestamp_ms=stamp_ms, values=values, raw=raw)
+
+
+def _data_chars(lines: list[bytes]) -> npt.NDArray[np.uint8] | tuple[str, str, int]:
+    """The data characters of scan lines (each 64 but the last), sums checked all at once;
+    or (kind, reason, line number) for the first bad line."""
+    if not lines:
+        return np.zeros(0, dtype=np.uint8)
+    full, last = lines[:-1], lines[-1]
+    width = DATA_LINE_CHARS + 1
+    joined = b"".join(full)
+    if len(joined) != len(full) * width:
+        i = next(i for i, line in enumerate(full) if len(line) != width)
+        return ("garbled", f"data line of {len(full[i]) - 1} characters (lines are cut every "
+                f"{DATA_LINE_CHARS})", i + 3)
+    if not 2 <= len(last) <= width:
+        return ("garbled", f"data line of {len(last) - 1} characters (lines are cut every "
+                f"{DATA_LINE_CHARS})", len(lines) + 2)
+    grid = np.frombuffer(joined, dtype=np.uint8).reshape(len(full), width)
+    sums = (grid[:, :DATA_LINE_CHARS].sum(axis=1, dtype=np.int64) & 0x3F) + 0x30
+    wrong = np.flatnonzero(sums != grid[:, DATA_LINE_CHARS])
+    if wrong.size:
+        i = int(wrong[0])
+        return ("checksum", f"data line {full[i]!r} fails its sum", i + 3)
+    if not line_sum_ok(last):
+        return ("checksum", f"data line {last!r} fails its sum", len(lines) + 2)
+    tail = np.frombuffer(last, dtype=np.uint8)[:-1]
+    return np.concatenate((grid[:, :DATA_LINE_CHARS].ravel(), tail))
 
 
 class ScipDecoder:
