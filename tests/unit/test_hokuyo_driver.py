@@ -16,6 +16,7 @@ import socket
 import termios
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -605,9 +606,13 @@ def test_bad_timing_settings_are_refused() -> None:
         HokuyoLidar(clock=VirtualClock(), cluster=0)
 
 
-def test_the_check_command_prints_vv_pp_and_a_scan(capsys: pytest.CaptureFixture[str]) -> None:
+def test_the_check_command_prints_vv_pp_and_a_scan(capsys: pytest.CaptureFixture[str],
+                                                   tmp_path: Path) -> None:
     """On the wall clock, as on the robot: the emulator answers from a real-time loop."""
     import threading
+
+    pytest.importorskip("matplotlib")
+    png = tmp_path / "scan.png"
 
     emu = HokuyoEmulator()  # wall clock (MonotonicClock-like) for the CLI's real-time loop
     stop = threading.Event()
@@ -621,7 +626,7 @@ def test_the_check_command_prints_vv_pp_and_a_scan(capsys: pytest.CaptureFixture
     thread = threading.Thread(target=serve, daemon=True)
     thread.start()
     try:
-        assert main([emu.url, "--timeout", "10", "--stream", "5"]) == 0
+        assert main([emu.url, "--timeout", "10", "--stream", "5", "--plot", str(png)]) == 0
     finally:
         stop.set()
         thread.join(5)
@@ -630,6 +635,7 @@ def test_the_check_command_prints_vv_pp_and_a_scan(capsys: pytest.CaptureFixture
     assert "VV: Hokuyo Automatic Co.,Ltd. | SOKUIKI Sensor UTM-30LX-EW" in out
     assert "PP: UTM-30LX-EW, 23-60000 mm, steps 0..1080 (front 540, 1440 per turn" in out
     assert "scan: 1081 steps (0..1080), 1081 valid" in out and "stream: 5 scans" in out
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and f"plot: {png}" in out
 
 
 def test_the_check_command_fails_clearly_when_nothing_answers(

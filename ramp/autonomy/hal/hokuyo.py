@@ -55,7 +55,8 @@ from ramp.autonomy.hal.lidar import (
     Scan,
     ScanGeometry,
 )
-from ramp.clock import Clock
+from ramp.clock import Clock, MonotonicClock
+from ramp.scheduler import Scheduler
 
 log = logging.getLogger("ramp.autonomy.hokuyo")
 
@@ -669,11 +670,47 @@ def describe_scan(scan: Scan) -> str:
     return ", ".join(parts)
 
 
+def plot_scan(scan: Scan, path: str, title: str = "") -> None:
+    """Draw `scan` seen from above in the sensor's frame (x ahead, y left) into a PNG.
+
+    Needs matplotlib (`pip install 'ramp[plot]'`)."""
+    import matplotlib
+
+    matplotlib.use("Agg")  # files only: no display on the robot
+    import matplotlib.pyplot as plt
+
+    g = scan.geometry
+    pts = scan.points()
+    fig, ax = plt.subplots(figsize=(6.4, 6.4), dpi=100)
+    reach = float(np.nanmax(scan.ranges)) * 1.08 if scan.valid.any() else 1.0
+    edge = np.array([g.angle(g.amin), g.angle(g.amax)])
+    ax.plot([0, reach * np.cos(edge[0])], [0, reach * np.sin(edge[0])], color="0.75", lw=0.8)
+    ax.plot([0, reach * np.cos(edge[1])], [0, reach * np.sin(edge[1])], color="0.75", lw=0.8,
+            label=f"field of view ({np.degrees(edge[1] - edge[0]):.0f}°)")
+    if len(pts):
+        ax.plot(pts[:, 0], pts[:, 1], ".", ms=2.5, color="tab:blue",
+                label=f"{len(pts)} returns")
+    gone = ~scan.valid
+    if gone.any():
+        a = scan.angles[gone]
+        ax.plot(0.3 * np.cos(a), 0.3 * np.sin(a), "x", ms=3, color="tab:red",
+                label=f"{int(gone.sum())} no return")
+    ax.plot([0], [0], marker=(3, 0, -90), ms=12, color="black", ls="none",
+            label="sensor (x ahead)")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x ahead (m)")
+    ax.set_ylabel("y left (m)")
+    ax.grid(True, lw=0.4, alpha=0.6)
+    ax.legend(loc="lower left", fontsize=8)
+    ax.set_title(title or f"scan {scan.seq}: {len(scan.ranges)} steps, "
+                 f"sensor time {scan.sensor_time:.3f} s", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """`python -m ramp.autonomy.hal.hokuyo [HOST:PORT]`: is the LIDAR there and sane?"""
-    from ramp.clock import MonotonicClock
-    from ramp.scheduler import Scheduler
-
     parser = argparse.ArgumentParser(
         prog="python -m ramp.autonomy.hal.hokuyo",
         description="Connect to a Hokuyo SCIP 2.0 LIDAR, print VV, PP and one scan.")
@@ -685,12 +722,31 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="also stream N scans (MD) and report their rate")
     parser.add_argument("--model", default="UTM-30LX",
                         help="model PP must report (prefix; '' accepts any)")
+    parser.add_argument("--plot", metavar="FILE.png",
+                        help="draw the scan seen from above (needs matplotlib: ramp[plot])")
     args = parser.parse_args(argv)
+    if args.plot:
+        try:
+            import matplotlib  # noqa: F401 - checked before connecting, not after
+        except ImportError:
+            parser.error("--plot needs matplotlib: pip install 'ramp[plot]'")
     try:
         parse_address(args.address)
     except ValueError as exc:
         parser.error(str(exc))
-    clock = MonotonicClock()
+    logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
+    # The loop pauses between steps (printing, plotting): late ticks here are no news.
+    sched_log = logging.getLogger("ramp.scheduler")
+    sched_level = sched_log.level
+    sched_log.setLevel(logging.ERROR)
+    try:
+        return _check(args, MonotonicClock())
+    finally:
+        sched_log.setLevel(sched_level)
+
+
+def _check(args: argparse.Namespace, clock: Clock) -> int:
+    """The check itself: connect, VV/PP, one scan, optionally a stream and a plot."""
     sched = Scheduler(clock, rate_hz=100)
     lidar = HokuyoLidar(args.address, clock=clock, loop=sched, expected_model=args.model,
                         name="hokuyo")
@@ -723,6 +779,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 1
         assert lidar.latest is not None
         print("scan: " + describe_scan(lidar.latest))
+        if args.plot:
+            plot_scan(lidar.latest, args.plot, f"{p.model} at {lidar.address}: "
+                      f"{describe_scan(lidar.latest).split(', nearest')[0]}")
+            print(f"plot: {args.plot}")
         if args.stream > 0:
             start_count, t0 = lidar.scans_received, clock.now()
             lidar.start_stream()
