@@ -234,6 +234,36 @@ def test_qt_while_a_scan_is_in_flight_drains_it_up_to_the_qt_echo(rig: Rig) -> N
     assert rig.wire[-1] == "GD0000108001"
 
 
+def test_stop_stream_while_the_md_is_still_unanswered_ends_the_stream(rig: Rig) -> None:
+    ready(rig)
+    rig.lidar.start_stream()  # MD on the wire, its acknowledgement not read yet
+    rig.lidar.stop_stream()
+    rig.run_until(lambda: rig.lidar.state == READY and rig.lidar.pending_commands == 0)
+    assert rig.wire[-3:] == ["MD0000108001000", "QT", "BM"]
+    seen = len(rig.scans)
+    rig.run(0.2)
+    assert len(rig.scans) == seen and rig.lidar.state == READY
+
+
+def test_a_host_name_that_does_not_resolve_is_retried_with_a_backoff(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    def no_dns(*args: object, **kwargs: object) -> None:  # no resolver: same on any machine
+        raise socket.gaierror(socket.EAI_NONAME, "Name or service not known")
+
+    monkeypatch.setattr(socket, "getaddrinfo", no_dns)
+    clock = VirtualClock()
+    lidar = HokuyoLidar("no-such-lidar.invalid:10940", clock=clock, backoff_min=0.5)
+    try:
+        lidar.start()
+        assert lidar.state == DISCONNECTED and "cannot resolve the host" in lidar.fault
+        assert lidar.fault.endswith("retrying in 0.5 s")
+        clock.advance(0.6)
+        lidar.tick(clock.now(), 0.6)
+        assert lidar.fault.endswith("retrying in 1 s")
+    finally:
+        lidar.stop()
+
+
 def test_stream_asked_for_before_the_link_is_up_starts_once_ready() -> None:
     r = Rig(stream=True)
     try:

@@ -256,8 +256,7 @@ class HokuyoLidar(Lidar):
             infos = socket.getaddrinfo(self.host, self.port, type=socket.SOCK_STREAM,
                                        flags=_numeric_flags(self.host))
         except OSError as exc:
-            self._set_state(DISCONNECTED, f"{self._who}: cannot resolve the host: {exc}")
-            self._retry_at = self.clock.now() + self._backoff
+            self._drop(self.clock.now(), f"cannot resolve the host: {exc}")
             return
         family, _, _, _, sockaddr = infos[0]
         self._sockaddr = (family, tuple(sockaddr))
@@ -473,6 +472,8 @@ class HokuyoLidar(Lidar):
         self._accept_stream = True
         self._last_scan_at = now
         self._set_state(STREAMING, "")
+        if not self.streaming_wanted:  # stop_stream() came while the MD was in flight
+            self._stop_stream()
 
     def _after_stream_qt(self, reply: scip.Reply, now: float) -> None:
         self._accept_stream = False
