@@ -671,14 +671,23 @@ class HokuyoEmulator:
     """A `HokuyoSensor` listening on TCP (loopback by default), serviced from one loop.
 
     `HokuyoEmulator(clock, range_source)` then, every tick, `service(now)`; `address` is
-    (host, port) and `url` the `host:port` a driver connects to.
+    (host, port) and `url` the `host:port` a driver connects to. `clock` is anything with
+    `now()` (a `ramp.clock.VirtualClock` in simulation; wall time when None). The other
+    options go to the sensor: `model` (what PP/VV report, the scan rate), `boot_time` (s, of
+    a reboot), `timestamp_offset_ms` (start the 24-bit counter elsewhere, e.g. near its wrap),
+    `semicolon_in_sum` (the other checksum form of VV/PP/II lines), `booted=False` (start
+    booting).
     """
 
     def __init__(self, clock: Clock | None = None, range_source: RangeSource | None = None, *,
-                 host: str = "127.0.0.1", port: int = 0, **sensor_options: object) -> None:
+                 host: str = "127.0.0.1", port: int = 0, model: SensorModel | None = None,
+                 boot_time: float = 1.0, timestamp_offset_ms: int = 0,
+                 semicolon_in_sum: bool = False, booted: bool = True) -> None:
         self.clock: Clock = clock or _MonotonicClock()
-        self.sensor = HokuyoSensor(range_source, now=self.clock.now(),
-                                   **sensor_options)  # type: ignore[arg-type]
+        self.sensor = HokuyoSensor(range_source, now=self.clock.now(), model=model,
+                                   boot_time=boot_time,
+                                   timestamp_offset_ms=timestamp_offset_ms,
+                                   semicolon_in_sum=semicolon_in_sum, booted=booted)
         self._listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self._listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         self._listener.bind((host, port))
