@@ -130,6 +130,16 @@ def render(doc: dict[str, Any]) -> str:
         out += ["", f"Gimbal emulator: {_num(g['us_per_tick'])} µs per 10 ms tick; IMU "
                 f"{_num(a['imu_none']['cpu_s_per_simulated_minute'])} s of CPU per simulated "
                 "minute.", ""]
+    lc = doc.get("lidar_codec")
+    if lc and "error" not in lc:
+        out += [f"**lidar_codec** (one {lc['steps']}-step MD scan, {lc['reply_bytes']:,} bytes in "
+                f"{lc['data_lines']} data lines, {lc['calls']:,} calls; baseline: splitting and "
+                "joining the same reply's lines)", "", HEAD]
+        for key, label in (("decode_reply_us", "decode_reply"), ("feed_us", "streaming feed"),
+                           ("decode_to_scan_us", "feed + Scan in metres"),
+                           ("emulator_scan_us", "emulator: one scan out")):
+            out += _pcts(label, lc[key], " µs", ("p50", "p99", "max"))
+        out += [_row("CPU % of a core at 40 scans/s", lc["cpu_pct_at_40_scans_per_s"], " %"), ""]
     return "\n".join(out)
 
 
