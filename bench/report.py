@@ -118,6 +118,17 @@ def render(doc: dict[str, Any]) -> str:
                 _row("VmRSS at ready", s["rss_mb_at_ready"], " MB"),
                 _row(f"VmRSS after {s['rss_mb_after']['seconds']:g} s", s["rss_mb_after"], " MB"),
                 _row("SIGTERM → exit, median", s["sigterm_to_exit_ms"]["median"], " ms"), ""]
+    a = doc.get("arena")
+    if a and "error" not in a:
+        out += ["**arena** (CPU per call in this process; baselines: the empty level arena's "
+                "step, one numpy pass over 1081 elements)", "", HEAD,
+                _row("world.step(0.01), median", a["world_step_us"]["p50"], " µs"),
+                _row("scan level, median", a["scan_level_us"]["p50"], " µs"),
+                _row("scan tilted 20°, median", a["scan_tilted_us"]["p50"], " µs"),
+                _row("scan tilted, gimbal moving, median", a["scan_tilted_gimbal_moving_us"][
+                    "p50"], " µs"),
+                "", f"A 10-minute mission's physics and LIDAR (60 000 steps, 24 000 scans): "
+                f"{a['mission_world_and_lidar_cpu_s']} s of CPU.", ""]
     return "\n".join(out)
 
 
