@@ -127,6 +127,7 @@ def render(doc: dict[str, Any]) -> str:
                 _row("scan tilted 20°, median", a["scan_tilted_us"]["p50"], " µs"),
                 _row("scan tilted, gimbal moving, median", a["scan_tilted_gimbal_moving_us"][
                     "p50"], " µs"),
+                _row("scan standing still, median", a["scan_standing_still_us"]["p50"], " µs"),
                 "", f"A 10-minute mission's physics and LIDAR (60 000 steps, 24 000 scans): "
                 f"{a['mission_world_and_lidar_cpu_s']} s of CPU.", ""]
     return "\n".join(out)

@@ -122,6 +122,8 @@ class LidarView:
             -1, 8, 3)
         self._rock_corners = terrain.rock_boxes()
         self._frame_cache: dict[tuple[int, int], tuple[npt.NDArray[np.intp], Array]] = {}
+        self._exact: tuple[tuple[bytes, bytes, float, float], Array, Array,
+                           npt.NDArray[np.int8]] | None = None
         self.world: MarteWorld | None = None
         self.gimbal: Callable[[], tuple[float, float]] = lambda: (0.0, 0.0)
 
@@ -166,18 +168,14 @@ class LidarView:
     def scan(self, pose: LidarPose, *, digging: bool = False, noise: bool = True) -> Scan:
         """Cast all 1081 beams from `pose`. `noise` False: exact ranges, no dust (tests)."""
         lp = self.params
-        dirs = self._beams @ pose.rotation.T
-        t, kind = self._walls(pose.origin, dirs)
-        rock_rows = self._spans(self._rock_corners, pose.origin, pose.rotation)
-        t_ground, k_ground = self.terrain.ray_hits(pose.origin, dirs, t, rock_rows)
-        closer = t_ground < t
-        t[closer] = t_ground[closer]
-        kind[closer] = k_ground[closer]
-        rows, t_frame = self._frame(pose)
-        if rows.size:
-            closer = t_frame < t[rows]
-            t[rows[closer]] = t_frame[closer]
-            kind[rows[closer]] = HIT_FRAME
+        key = (pose.origin.tobytes(), pose.rotation.tobytes(), pose.pan, pose.tilt)
+        if self._exact is not None and self._exact[0] == key:
+            # The robot and gimbal stand still (digging, dumping, scanning): same geometry.
+            _, dirs, t_exact, k_exact = self._exact
+        else:
+            dirs, t_exact, k_exact = self._cast(pose)
+            self._exact = (key, dirs, t_exact, k_exact)
+        t, kind = t_exact.copy(), k_exact.copy()
         if noise:
             t += self._rng.standard_normal(t.size) * lp.noise_sigma_near
             far = t > lp.noise_far_from
@@ -197,6 +195,22 @@ class LidarView:
         mm = np.full(t.size, lp.no_return_mm, dtype=np.int64)
         mm[valid] = np.rint(t[valid] * 1000.0)
         return Scan(t, kind, mm, pose, dirs)
+
+    def _cast(self, pose: LidarPose) -> tuple[Array, Array, npt.NDArray[np.int8]]:
+        """(beam directions, exact ranges, hit kinds) from `pose`: walls, terrain, frame."""
+        dirs = self._beams @ pose.rotation.T
+        t, kind = self._walls(pose.origin, dirs)
+        rock_rows = self._spans(self._rock_corners, pose.origin, pose.rotation)
+        t_ground, k_ground = self.terrain.ray_hits(pose.origin, dirs, t, rock_rows)
+        closer = t_ground < t
+        t[closer] = t_ground[closer]
+        kind[closer] = k_ground[closer]
+        rows, t_frame = self._frame(pose)
+        if rows.size:
+            closer = t_frame < t[rows]
+            t[rows[closer]] = t_frame[closer]
+            kind[rows[closer]] = HIT_FRAME
+        return dirs, t, kind
 
     def _frame(self, pose: LidarPose) -> tuple[npt.NDArray[np.intp], Array]:
         """(steps, ranges) of the beams that meet the robot's own structure. They depend on

@@ -79,7 +79,7 @@ def test_figures_are_real_measurements_beside_baselines(smoke: dict[str, Any]) -
 
     arena = smoke["arena"]
     for key in ("world_step_us", "scan_level_us", "scan_tilted_us",
-                "scan_tilted_gimbal_moving_us"):
+                "scan_tilted_gimbal_moving_us", "scan_standing_still_us"):
         p50 = arena[key]["p50"]
         assert p50["value"] > 0 and p50["baseline"] > 0 and p50["ratio"] is not None
     assert arena["beams_with_echo"]["tilted"] > 900
