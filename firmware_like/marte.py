@@ -41,6 +41,8 @@ from typing import NamedTuple
 
 from firmware_like.arena import (
     Layout,
+    Pose,
+    StartSpec,
     collector_span,
     disc_overlap,
     footprint_corners,
@@ -175,11 +177,13 @@ class MarteWorld:
             self.x = p.start_region_end / 2.0 + 0.1
             self.y = p.arena_width / 2.0
             self.heading = 0.0
+            self.start: StartSpec | None = None
         else:
-            spec = layout.start if layout.start is not None else seeded_start(seed)
-            pose = start_pose(spec, seed, p, self.arena)
+            self.start = layout.start if layout.start is not None else seeded_start(seed)
+            pose = start_pose(self.start, seed, p, self.arena)
             self.x, self.y = pose.x, pose.y
             self.heading = math.remainder(math.radians(pose.yaw_deg), 2.0 * math.pi)
+        self.start_pose = Pose(self.x, self.y, self.heading_deg)
         self._settle()
         self.lift_pos = 0.0
         self.bin_kg = 0.0
@@ -310,6 +314,28 @@ class MarteWorld:
         roll, pitch, yaw (rad, Z-Y-X, SPEC frame), body angular velocity (rad/s) and body
         linear acceleration without gravity (m/s^2), as of the last step."""
         return self._imu
+
+    def describe(self) -> dict[str, object]:
+        """The true world, as the header of a trace (SPEC 6.3 `--trace`): arena, robot,
+        rocks, craters and start (box, heading and the exact pose, yaw in degrees)."""
+        p, a = self.params, self.arena
+        start: dict[str, object] = {"x": self.start_pose.x, "y": self.start_pose.y,
+                                    "yaw": self.start_pose.yaw_deg}
+        if self.start is not None:
+            start = {"box": self.start.box, "heading": self.start.heading_deg, **start}
+        return {
+            "arena": {"length": p.arena_length, "width": p.arena_width,
+                      "start_end_x": p.start_region_end, "start_split_y": a.start_split_y,
+                      "obstacle_end_x": p.dig_region_start, "collector_y": p.collector_y,
+                      "collector_width": p.collector_width, "wall_height": a.wall_height},
+            "robot": {"length": p.robot_length, "width": p.robot_width},
+            "rocks": [{"x": r.x, "y": r.y, "d": r.d, "height": r.height}
+                      for r in self.layout.rocks],
+            "craters": [{"x": c.x, "y": c.y, "d": c.d, "depth": c.depth}
+                        for c in self.layout.craters],
+            "start": start,
+            "world": self.layout.source,
+        }
 
     def truth(self) -> dict[str, float | int | bool]:
         """The referee's ground truth now (SPEC 6.1, 6.3 trace fields): never for the

@@ -287,6 +287,20 @@ def test_a_seeded_world_starts_where_its_layout_says() -> None:
     assert len(w.layout.rocks) == 3 and len(w.layout.craters) == 2
 
 
+def test_describe_gives_the_true_world_for_a_trace_header() -> None:
+    w = MarteWorld.seeded(9, start_box="left", heading_deg=90)
+    doc = w.describe()
+    assert doc["arena"]["length"] == 7.38 and doc["arena"]["width"] == 3.88
+    assert doc["robot"] == {"length": 1.2, "width": 0.75}
+    assert len(doc["rocks"]) == 3 and len(doc["craters"]) == 2
+    assert doc["rocks"][0]["x"] == w.layout.rocks[0].x
+    assert doc["start"]["box"] == "left" and doc["start"]["heading"] == 90.0
+    assert doc["start"]["x"] == w.x and doc["start"]["yaw"] == pytest.approx(w.heading_deg)
+    import json
+
+    json.dumps(doc)  # serialisable as it is
+
+
 def test_the_same_seed_gives_the_same_world_and_run() -> None:
     def go(seed: int) -> tuple[float, ...]:
         w = MarteWorld.seeded(seed)
