@@ -140,6 +140,18 @@ def render(doc: dict[str, Any]) -> str:
                            ("emulator_scan_us", "emulator: one scan out")):
             out += _pcts(label, lc[key], " µs", ("p50", "p99", "max"))
         out += [_row("CPU % of a core at 40 scans/s", lc["cpu_pct_at_40_scans_per_s"], " %"), ""]
+    a = doc.get("arena")
+    if a and "error" not in a:
+        out += ["**arena** (CPU per call in this process; baselines: the empty level arena's "
+                "step, one numpy pass over 1081 elements)", "", HEAD,
+                _row("world.step(0.01), median", a["world_step_us"]["p50"], " µs"),
+                _row("scan level, median", a["scan_level_us"]["p50"], " µs"),
+                _row("scan tilted 20°, median", a["scan_tilted_us"]["p50"], " µs"),
+                _row("scan tilted, gimbal moving, median", a["scan_tilted_gimbal_moving_us"][
+                    "p50"], " µs"),
+                _row("scan standing still, median", a["scan_standing_still_us"]["p50"], " µs"),
+                "", f"A 10-minute mission's physics and LIDAR (60 000 steps, 24 000 scans): "
+                f"{a['mission_world_and_lidar_cpu_s']} s of CPU.", ""]
     return "\n".join(out)
 
 

@@ -7,15 +7,23 @@ seed. Device emulators (Sabertooth over a pty, ...) and the HAL-level `sim` driv
 its signals by the YAML names `module.device`; `ramp/` never imports this file except
 through the one simulation entry point.
 
-Frames and signs (seen from above, the collector wall x = 0 at the bottom of the page):
+Frames and signs: the arena frame of SPEC 6.1, which the autonomy, traces and referee use.
 
 - x runs along the arena's 7.38 m length, from the collector wall (x = 0) towards the
-  digging region; y runs across its 3.88 m width and points to the RIGHT of +x.
-- heading 0 faces +x; heading grows CLOCKWISE seen from above, so heading 90 deg faces +y.
-  A positive yaw rate is a clockwise turn, i.e. turning right (SPEC 2.3: drive direction 90
-  spins clockwise). This is the x-forward, y-right, yaw-clockwise convention of NED frames.
+  digging region; y runs across its 3.88 m width, +y on the LEFT when facing +x; z is up.
+- heading (yaw) 0 faces +x and grows COUNTER-CLOCKWISE seen from above, so heading 90 deg
+  faces +y. A positive yaw rate is a turn to the left. SPEC 2.3's drive direction 90 spins
+  the robot clockwise, so its yaw DECREASES. The body frame is x forward, y left, z up; roll,
+  pitch and yaw are Z-Y-X Euler angles in it (pitch positive nose DOWN, roll positive left
+  side UP: right-handed about y-left and x-forward).
 - the robot's front carries the bucket ladder; its rear (-x at heading 0) carries the two
   docking buttons at its rear-left and rear-right corners and dumps over the rear.
+
+With a `Layout` (`firmware_like.arena`) the world also holds the arena's rocks, craters and
+terrain (`firmware_like.terrain`): the chassis rests on its four wheels, so it pitches and
+rolls over the ground, a crater's rim and a rock it runs into; a rock stops it; a wheel deep
+in a crater traps it. The world keeps the referee's truth (SPEC 6.1: collisions, crater
+entries, delivered kg) for the referee only: the autonomy sees the world through its sensors.
 
 Wiring as built (the YAML compensates with polarity): positive duty rolls a LEFT wheel
 forward but a RIGHT wheel backward (mirrored mounting); `ble.chain_left` positive and
@@ -29,8 +37,23 @@ import bisect
 import math
 import random
 from collections.abc import Iterable
+from typing import NamedTuple
 
+from firmware_like.arena import (
+    Layout,
+    Pose,
+    StartSpec,
+    collector_span,
+    disc_overlap,
+    footprint_corners,
+    random_layout,
+    region_of,
+    seeded_start,
+    start_pose,
+)
+from firmware_like.arena_params import ArenaParams
 from firmware_like.marte_params import MarteParams
+from firmware_like.terrain import Terrain
 
 LEFT_WHEELS = ("base.lf_wheel", "base.lb_wheel")
 RIGHT_WHEELS = ("base.rf_wheel", "base.rb_wheel")
@@ -54,6 +77,37 @@ _MOUNT: dict[str, float] = {
 REGIONS = ("start", "obstacle", "dig")
 
 
+class ImuTruth(NamedTuple):
+    """The chassis' true motion, for an IMU emulator (SPEC frame, body axes x forward, y left,
+    z up). Angles are Z-Y-X Euler angles in radians: `roll` positive left side up, `pitch`
+    positive nose down, `yaw` counter-clockwise from +x in [-pi, pi]. `angular_velocity`
+    (rad/s, p q r about body x y z) and `linear_acceleration` (m/s^2, WITHOUT gravity) are
+    in the body axes. An accelerometer reads the specific force, linear_acceleration +
+    g * (-sin pitch, cos pitch sin roll, cos pitch cos roll) with g = 9.80665, so a level
+    robot at rest reads (0, 0, +g). Rates and accelerations are finite differences over the
+    last physics piece (at most `MarteParams.max_step`); `time` is the world time they
+    refer to."""
+
+    time: float
+    roll: float
+    pitch: float
+    yaw: float
+    angular_velocity: tuple[float, float, float]
+    linear_acceleration: tuple[float, float, float]
+
+
+class ChassisPose(NamedTuple):
+    """Where the chassis is: footprint centre (x, y) and the height z (m) of the plane under
+    its wheels there, and its attitude (roll, pitch, yaw in rad, as in ImuTruth)."""
+
+    x: float
+    y: float
+    z: float
+    roll: float
+    pitch: float
+    yaw: float
+
+
 def _known(name: str, kind: str, known: Iterable[str]) -> None:
     """Raise KeyError naming every valid signal, so a typo in YAML is easy to spot."""
     names = tuple(known)
@@ -62,18 +116,31 @@ def _known(name: str, kind: str, known: Iterable[str]) -> None:
 
 
 class MarteWorld:
-    """MARTE in the RMC arena: pose, motors, battery, lift, bin, collector.
+    """MARTE in the RMC arena: pose, attitude, motors, battery, lift, bin, collector, and
+    (with a layout) rocks, craters, terrain and the referee's counts.
+
+    `layout` None: an empty arena with level ground, the robot in the middle of the start
+    region facing +x (what the backend's `ramp run --sim` drives). With a layout, the robot
+    starts at `start_pose(layout.start, seed)` (a start drawn from the seed when the layout
+    has none) and `seed` also draws the ground's undulation. `MarteWorld.seeded(seed)` is
+    the SPEC's random arena.
 
     Public state for tests and benchmarks: `x`, `y` (m, centre of the footprint),
-    `heading` (rad, clockwise from +x, in [-pi, pi]), `heading_deg`, `bin_kg`,
+    `heading` (rad, counter-clockwise from +x, in [-pi, pi]; `yaw` is the same),
+    `heading_deg`, `z`, `roll`, `pitch` (chassis attitude, see `ImuTruth`), `bin_kg`,
     `delivered_kg`, `spilled_kg`, `excavated_kg`, `lift_pos` (0 retracted/digging ..
     1 extended/dumping), `battery_voltage` (terminal, V), `battery_current` (A),
-    `battery_soc` (0..1) and `time` (s of simulated time).
+    `battery_soc` (0..1), `time` (s of simulated time), and the referee's truth
+    `collisions`, `crater_entries` (counts of contacts begun, SPEC 6.1), `collision_log`,
+    `crater_log` ((time, what) of each), `trapped` (a wheel stuck in a crater).
     """
 
-    def __init__(self, params: MarteParams | None = None, seed: int = 0) -> None:
+    def __init__(self, params: MarteParams | None = None, seed: int = 0,
+                 layout: Layout | None = None, arena: ArenaParams | None = None) -> None:
         self.params = params if params is not None else MarteParams()
+        self.arena = arena if arena is not None else ArenaParams()
         p = self.params
+        self.seed = seed
         self._rng = random.Random(seed)
         self._ocv_soc = [s for s, _ in p.ocv_curve]
         self._ocv_volts = [v * p.battery_cells for _, v in p.ocv_curve]
@@ -88,10 +155,36 @@ class MarteWorld:
         self._digging = False
         self._chain_dig_speed = 0.0
         self.time = 0.0
-        # Start in the middle of the starting region, facing the digging region.
-        self.x = p.start_region_end / 2.0 + 0.1
-        self.y = p.arena_width / 2.0
-        self.heading = 0.0
+        self.layout = layout if layout is not None else Layout(source="empty arena")
+        self.terrain = Terrain(self.layout, self.arena, seed, flat=layout is None)
+        self._flat = layout is None
+        self._rocks = [(r.x, r.y, r.radius) for r in self.layout.rocks]
+        self._craters = [(c.x, c.y, c.radius) for c in self.layout.craters]
+        self._reach = math.hypot(p.robot_length, p.robot_width) / 2.0 + max(
+            [r for *_, r in self._rocks + self._craters] + [0.0])
+        self.collisions = 0
+        self.crater_entries = 0
+        self.collision_log: list[tuple[float, str]] = []
+        self.crater_log: list[tuple[float, str]] = []
+        self.trapped = False
+        self._traction = 1.0
+        self._touching: set[str] = set()
+        self.z = self.roll = self.pitch = 0.0
+        self._velocity = (0.0, 0.0, 0.0)  # world frame, over the last piece (for the IMU)
+        self._imu = ImuTruth(0.0, 0.0, 0.0, 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        if layout is None:
+            # Start in the middle of the starting region, facing the digging region.
+            self.x = p.start_region_end / 2.0 + 0.1
+            self.y = p.arena_width / 2.0
+            self.heading = 0.0
+            self.start: StartSpec | None = None
+        else:
+            self.start = layout.start if layout.start is not None else seeded_start(seed)
+            pose = start_pose(self.start, seed, p, self.arena)
+            self.x, self.y = pose.x, pose.y
+            self.heading = math.remainder(math.radians(pose.yaw_deg), 2.0 * math.pi)
+        self.start_pose = Pose(self.x, self.y, self.heading_deg)
+        self._settle()
         self.lift_pos = 0.0
         self.bin_kg = 0.0
         self.delivered_kg = 0.0
@@ -103,6 +196,17 @@ class MarteWorld:
             p.battery_r_internal)
         self._noise: dict[str, float] = {}
         self._sample_noise()
+
+    @classmethod
+    def seeded(cls, seed: int, start_box: str | None = None, heading_deg: float | None = None,
+               params: MarteParams | None = None, arena: ArenaParams | None = None,
+               ) -> MarteWorld:
+        """The SPEC 6.1 arena drawn from a seed: three rocks, two craters, a start box and
+        heading (unless given), the start pose perturbed, the ground's undulation."""
+        p = params if params is not None else MarteParams()
+        a = arena if arena is not None else ArenaParams()
+        layout = random_layout(seed, p, a, start_box, heading_deg)
+        return cls(p, seed=seed, layout=layout, arena=a)
 
     # ---- commands and readings (the SimWorld protocol of ramp/hal/simio.py) -------------
 
@@ -172,7 +276,9 @@ class MarteWorld:
         self._lift_jammed = bool(jammed)
 
     def place(self, x: float, y: float, heading_deg: float) -> None:
-        """Set the pose; the footprint must lie inside the arena."""
+        """Set the pose (heading counter-clockwise from +x); the footprint must lie inside
+        the arena. A teleport for tests and tools: the chassis settles on the terrain there,
+        and contacts it starts in are not counted (only contacts begun by driving are)."""
         p = self.params
         old = (self.x, self.y, self.heading)
         self.x, self.y = float(x), float(y)
@@ -185,13 +291,61 @@ class MarteWorld:
             self.x, self.y, self.heading = old
             raise ValueError(f"pose ({x}, {y}, {heading_deg} deg) puts the robot outside "
                              f"the {p.arena_length} x {p.arena_width} m arena")
+        self._settle()
 
     # ---- derived state ------------------------------------------------------------------------
 
     @property
     def heading_deg(self) -> float:
-        """Heading in degrees, clockwise from +x, in [-180, 180]."""
+        """Heading in degrees, counter-clockwise from +x, in [-180, 180]."""
         return math.degrees(self.heading)
+
+    @property
+    def yaw(self) -> float:
+        """Heading in radians, counter-clockwise from +x (SPEC 6.1's yaw)."""
+        return self.heading
+
+    def chassis_pose(self) -> ChassisPose:
+        """Position and attitude of the chassis, for the LIDAR's view of the arena."""
+        return ChassisPose(self.x, self.y, self.z, self.roll, self.pitch, self.heading)
+
+    def imu_truth(self) -> ImuTruth:
+        """The chassis' true attitude and motion for an IMU emulator (see `ImuTruth`):
+        roll, pitch, yaw (rad, Z-Y-X, SPEC frame), body angular velocity (rad/s) and body
+        linear acceleration without gravity (m/s^2), as of the last step."""
+        return self._imu
+
+    def describe(self) -> dict[str, object]:
+        """The true world, as the header of a trace (SPEC 6.3 `--trace`): arena, robot,
+        rocks, craters and start (box, heading and the exact pose, yaw in degrees)."""
+        p, a = self.params, self.arena
+        start: dict[str, object] = {"x": self.start_pose.x, "y": self.start_pose.y,
+                                    "yaw": self.start_pose.yaw_deg}
+        if self.start is not None:
+            start = {"box": self.start.box, "heading": self.start.heading_deg, **start}
+        return {
+            "arena": {"length": p.arena_length, "width": p.arena_width,
+                      "start_end_x": p.start_region_end, "start_split_y": a.start_split_y,
+                      "obstacle_end_x": p.dig_region_start, "collector_y": p.collector_y,
+                      "collector_width": p.collector_width, "wall_height": a.wall_height},
+            "robot": {"length": p.robot_length, "width": p.robot_width},
+            "rocks": [{"x": r.x, "y": r.y, "d": r.d, "height": r.height}
+                      for r in self.layout.rocks],
+            "craters": [{"x": c.x, "y": c.y, "d": c.d, "depth": c.depth}
+                        for c in self.layout.craters],
+            "start": start,
+            "world": self.layout.source,
+        }
+
+    def truth(self) -> dict[str, float | int | bool]:
+        """The referee's ground truth now (SPEC 6.1, 6.3 trace fields): never for the
+        autonomy."""
+        return {
+            "t": self.time, "x": self.x, "y": self.y, "yaw": self.heading_deg,
+            "lift": self.lift_pos, "bin_kg": self.bin_kg, "delivered_kg": self.delivered_kg,
+            "collisions": self.collisions, "crater_entries": self.crater_entries,
+            "trapped": self.trapped,
+        }
 
     @property
     def lift_jammed(self) -> bool:
@@ -214,7 +368,7 @@ class MarteWorld:
 
     def region(self) -> str:
         """Arena region of the robot's centre: "start", "obstacle" or "dig"."""
-        return self._region_of(self.x)
+        return region_of(self.x, self.params)
 
     def front_x(self) -> float:
         """x of the middle of the front edge (where the bucket ladder is)."""
@@ -225,15 +379,15 @@ class MarteWorld:
         return self.x - 0.5 * self.params.robot_length * math.cos(self.heading)
 
     def at_collector(self) -> bool:
-        """True when regolith dumped now would land in the collector bin."""
+        """True when regolith dumped now counts as delivered (SPEC 6.1): the rear of the
+        robot (both rear corners) within `dump_reach` (0.15 m) of the x = 0 wall and within
+        the collector's width."""
         p = self.params
         rear_left, rear_right = self._corners()[2:]
-        if self.rear_x() > p.dump_reach:
+        if max(rear_left[0], rear_right[0]) > p.dump_reach:
             return False
-        lo = min(rear_left[1], rear_right[1])
-        hi = max(rear_left[1], rear_right[1])
-        half = p.collector_width / 2.0
-        return hi > p.collector_y - half and lo < p.collector_y + half
+        lo, hi = collector_span(p)
+        return min(rear_left[1], rear_right[1]) >= lo and max(rear_left[1], rear_right[1]) <= hi
 
     def state(self) -> dict[str, float | str | bool]:
         """A snapshot of everything a benchmark would log."""
@@ -244,6 +398,9 @@ class MarteWorld:
             "excavated_kg": self.excavated_kg, "battery_voltage": self.battery_voltage,
             "battery_current": self.battery_current, "battery_soc": self.battery_soc,
             "digging": self._digging, "lift_jammed": self._lift_jammed,
+            "z": self.z, "roll_deg": math.degrees(self.roll),
+            "pitch_deg": math.degrees(self.pitch), "collisions": self.collisions,
+            "crater_entries": self.crater_entries, "trapped": self.trapped,
         }
 
     # ---- integration --------------------------------------------------------------------------
@@ -278,15 +435,145 @@ class MarteWorld:
 
     def _move_chassis(self, dt: float) -> None:
         p = self.params
+        x0, y0, z0, yaw0, roll0, pitch0 = (self.x, self.y, self.z, self.heading, self.roll,
+                                           self.pitch)
         left = sum(self._wheel_ground_speed(n) for n in LEFT_WHEELS) / len(LEFT_WHEELS)
         right = sum(self._wheel_ground_speed(n) for n in RIGHT_WHEELS) / len(RIGHT_WHEELS)
+        left *= self._traction
+        right *= self._traction
         v = 0.5 * (left + right)
-        yaw_rate = p.skid_efficiency * (left - right) / p.track_width  # + is clockwise
+        # Counter-clockwise positive: the right side running faster turns the robot left.
+        yaw_rate = p.skid_efficiency * (right - left) / p.track_width
         mid = self.heading + 0.5 * yaw_rate * dt
         self.x += v * math.cos(mid) * dt
         self.y += v * math.sin(mid) * dt
         self.heading = math.remainder(self.heading + yaw_rate * dt, 2.0 * math.pi)
         self._clamp_to_arena()
+        if self._rocks:
+            self._push_off_rocks()
+        self._update_contacts(count=True)
+        self._update_attitude()
+        self._update_imu(dt, x0, y0, z0, yaw0, roll0, pitch0)
+
+    def _push_off_rocks(self) -> None:
+        """A rock stops the robot: a footprint deeper into a rock's disc than a wheel can ride
+        up its flank is pushed back out, keeping its heading (it slides along the rock)."""
+        p, ride = self.params, self.arena.rock_ride_up
+        moved = False
+        for cx, cy, r in self._rocks:
+            if (cx - self.x) ** 2 + (cy - self.y) ** 2 >= self._reach ** 2:
+                continue
+            depth, nx, ny = disc_overlap(self.x, self.y, self.heading, p.robot_length,
+                                         p.robot_width, cx, cy, r)
+            limit = min(ride, r)
+            if depth > limit:
+                self.x += nx * (depth - limit)
+                self.y += ny * (depth - limit)
+                moved = True
+        if moved:
+            self._clamp_to_arena()
+
+    def _contacts(self) -> tuple[set[str], set[str]]:
+        """(what the footprint collides with, craters it overlaps) now, by SPEC 6.1."""
+        p, a = self.params, self.arena
+        eps = a.contact_epsilon
+        corners = self._corners()
+        hits: set[str] = set()
+        at_x0 = [i for i, c in enumerate(corners) if c[0] <= eps]
+        if at_x0:
+            lo, hi = collector_span(p)
+            docking = (all(i >= 2 for i in at_x0)  # only rear corners touch
+                       and min(c[0] for c in corners) >= -a.docking_tolerance
+                       and all(lo <= corners[i][1] <= hi for i in at_x0))
+            if not docking:
+                hits.add("wall x=0")
+        if any(c[0] >= p.arena_length - eps for c in corners):
+            hits.add(f"wall x={p.arena_length:g}")
+        if any(c[1] <= eps for c in corners):
+            hits.add("wall y=0")
+        if any(c[1] >= p.arena_width - eps for c in corners):
+            hits.add(f"wall y={p.arena_width:g}")
+        craters: set[str] = set()
+        for kind, discs, out in (("rock", self._rocks, hits), ("crater", self._craters,
+                                                                craters)):
+            for i, (cx, cy, r) in enumerate(discs):
+                if (cx - self.x) ** 2 + (cy - self.y) ** 2 >= self._reach ** 2:
+                    continue
+                depth, _, _ = disc_overlap(self.x, self.y, self.heading, p.robot_length,
+                                           p.robot_width, cx, cy, r)
+                if depth > 0.0:
+                    out.add(f"{kind} {i}")
+        return hits, craters
+
+    def _update_contacts(self, count: bool) -> None:
+        """Count each collision and crater entry once, when it begins."""
+        hits, craters = self._contacts()
+        now = hits | craters
+        if count:
+            for what in sorted(hits - self._touching):
+                self.collisions += 1
+                self.collision_log.append((self.time, what))
+            for what in sorted(craters - self._touching):
+                self.crater_entries += 1
+                self.crater_log.append((self.time, what))
+        self._touching = now
+
+    def _update_attitude(self) -> None:
+        """Rest the chassis on its four wheels: height, pitch and roll from where each wheel
+        touches the terrain; the deepest wheel in a crater sets the traction."""
+        if self._flat:
+            return
+        p, a = self.params, self.arena
+        c, s = math.cos(self.heading), math.sin(self.heading)
+        hb, ht = p.wheelbase / 2.0, p.track_width / 2.0
+        radius, half_w = p.wheel_diameter / 2.0, p.wheel_width / 2.0
+        z: list[float] = []
+        sink = 0.0
+        for f, lft in ((hb, ht), (hb, -ht), (-hb, ht), (-hb, -ht)):
+            wx, wy = self.x + f * c - lft * s, self.y + f * s + lft * c
+            h, ground = self.terrain.wheel_contact(wx, wy, c, s, radius, half_w)
+            z.append(h)
+            sink = max(sink, ground - h)
+        fl, fr, rl, rr = z
+        self.z = (fl + fr + rl + rr) / 4.0
+        self.pitch = math.asin(max(-1.0, min(1.0, ((rl + rr) - (fl + fr)) / (2.0 * p.wheelbase))))
+        across = 2.0 * p.track_width * math.cos(self.pitch)
+        self.roll = math.asin(max(-1.0, min(1.0, ((fl + rl) - (fr + rr)) / across)))
+        self.trapped = sink >= a.crater_trap_sink
+        if self.trapped:
+            self._traction = 0.0
+        else:
+            self._traction = 1.0 - (1.0 - a.crater_slow_min) * max(0.0, sink) / a.crater_trap_sink
+
+    def _update_imu(self, dt: float, x0: float, y0: float, z0: float, yaw0: float,
+                    roll0: float, pitch0: float) -> None:
+        """Finite differences over this piece: body rates and acceleration (no gravity)."""
+        vx, vy, vz = (self.x - x0) / dt, (self.y - y0) / dt, (self.z - z0) / dt
+        pvx, pvy, pvz = self._velocity
+        self._velocity = (vx, vy, vz)
+        ax, ay, az = (vx - pvx) / dt, (vy - pvy) / dt, (vz - pvz) / dt
+        droll = (self.roll - roll0) / dt
+        dpitch = (self.pitch - pitch0) / dt
+        dyaw = math.remainder(self.heading - yaw0, 2.0 * math.pi) / dt
+        cr, sr = math.cos(self.roll), math.sin(self.roll)
+        cp, sp = math.cos(self.pitch), math.sin(self.pitch)
+        cy, sy = math.cos(self.heading), math.sin(self.heading)
+        gyro = (droll - dyaw * sp, dpitch * cr + dyaw * cp * sr, -dpitch * sr + dyaw * cp * cr)
+        # Body = R^T world, R = Rz(yaw) Ry(pitch) Rx(roll).
+        r1 = cy * ax + sy * ay  # undo yaw
+        r2 = -sy * ax + cy * ay
+        b1 = cp * r1 - sp * az  # undo pitch
+        b3 = sp * r1 + cp * az
+        accel = (b1, cr * r2 + sr * b3, -sr * r2 + cr * b3)  # undo roll
+        self._imu = ImuTruth(self.time + dt, self.roll, self.pitch, self.heading, gyro, accel)
+
+    def _settle(self) -> None:
+        """After a teleport: rest on the terrain, take contacts as they are, zero the IMU."""
+        self._update_attitude()
+        self._update_contacts(count=False)
+        self._velocity = (0.0, 0.0, 0.0)
+        self._imu = ImuTruth(self.time, self.roll, self.pitch, self.heading, (0.0, 0.0, 0.0),
+                             (0.0, 0.0, 0.0))
 
     def _clamp_to_arena(self) -> None:
         """Walls stop the robot: push the footprint back inside, keeping its heading."""
@@ -378,21 +665,7 @@ class MarteWorld:
     def _corners(self) -> tuple[tuple[float, float], ...]:
         """Footprint corners: front-left, front-right, rear-left, rear-right (world x, y)."""
         p = self.params
-        c, s = math.cos(self.heading), math.sin(self.heading)
-        half_l, half_w = p.robot_length / 2.0, p.robot_width / 2.0
-        out = []
-        # Body frame: f forward, r to the right; left is -r because y is right of x.
-        for f, r in ((half_l, -half_w), (half_l, half_w), (-half_l, -half_w), (-half_l, half_w)):
-            out.append((self.x + f * c - r * s, self.y + f * s + r * c))
-        return tuple(out)
-
-    def _region_of(self, x: float) -> str:
-        p = self.params
-        if x < p.start_region_end:
-            return "start"
-        if x < p.dig_region_start:
-            return "obstacle"
-        return "dig"
+        return footprint_corners(self.x, self.y, self.heading, p.robot_length, p.robot_width)
 
     def _sample_noise(self) -> None:
         """Draw this step's sensor noise once, so repeated reads agree and runs repeat."""

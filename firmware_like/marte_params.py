@@ -25,16 +25,21 @@ class MarteParams:
     # The collector bin is centred on the outside of the starting region's 3.88 m wall
     # (thesis p.30), i.e. the wall x = 0, centred at y = 3.88 / 2.
     collector_y: float = 1.94  # m; thesis p.30 (centre of the 3.88 m wall)
-    collector_width: float = 1.65  # m; ASSUMPTION: RMC collector opening, not in the thesis
-    dump_reach: float = 0.10  # m; ASSUMPTION: rear edge must be this close to the wall to hit
+    collector_width: float = 1.65  # m; SPEC 6.1 (the RMC collector bin's width)
+    dump_reach: float = 0.15  # m; SPEC 6.1: regolith is delivered only while the rear is
+    # within 0.15 m of the x = 0 wall (and within the collector's width)
     qualify_kg: float = 10.0  # kg in 10 min to qualify; thesis p.30, SPEC 6
     run_time: float = 600.0  # s; "within 10 minutes", thesis p.30
 
     # ---- chassis (thesis p.34) ---------------------------------------------------------------
-    # RMC 2014 limits the robot to 1.5 m x 0.75 m; MARTE's exact footprint is not in the thesis.
-    robot_length: float = 1.2  # m along the heading; ASSUMPTION (within the RMC limit)
-    robot_width: float = 0.75  # m; ASSUMPTION (the RMC width limit)
+    # RMC 2014 limits the robot to 1.5 m x 0.75 m; MARTE's footprint is not in the thesis.
+    robot_length: float = 1.2  # m along the heading; SPEC 6.1 "1.2 m x 0.75 m"
+    robot_width: float = 0.75  # m; SPEC 6.1
     track_width: float = 0.65  # m between left and right wheel centres; ASSUMPTION
+    # m between front and rear axles; ASSUMPTION: the wheels sit at the footprint's ends
+    # (1.2 m footprint - one 0.3048 m wheel diameter)
+    wheelbase: float = 0.895
+    wheel_width: float = 0.10  # m; ASSUMPTION (a 4-inch-wide wheel, typical for 12-inch ones)
     wheel_diameter: float = 0.3048  # m; thesis p.34 "12 inches in diameter"
     gear_ratio: float = 256.0  # thesis p.34 "343 oz-in motors, each paired with 256:1 gearboxes"
     # Motor free speed is not in the thesis. ASSUMPTION: 4800 rpm at `motor_ref_voltage`,
@@ -109,7 +114,8 @@ class MarteParams:
         if socs[0] != 0.0 or socs[-1] != 1.0 or socs != sorted(set(socs)):
             raise ValueError("ocv_curve must run from soc 0.0 to 1.0 in increasing order")
         for name in ("arena_length", "arena_width", "robot_length", "robot_width",
-                     "track_width", "wheel_diameter", "gear_ratio", "motor_free_rpm",
+                     "track_width", "wheelbase", "wheel_width", "wheel_diameter", "gear_ratio",
+                     "motor_free_rpm",
                      "motor_ref_voltage", "motor_time_constant", "battery_capacity_ah",
                      "lift_stroke_time", "bin_capacity", "dump_rate", "max_step"):
             value = getattr(self, name)

@@ -144,6 +144,9 @@ def build_parser() -> argparse.ArgumentParser:
     check = sub.add_parser("check", help="validate a config file without touching hardware")
     check.add_argument("file", nargs="?", default="ramp.yaml")
     check.set_defaults(func=cmd_check)
+    from ramp.simulation.commands import add_sim_parser  # `ramp sim …`: lazy, light to import
+
+    add_sim_parser(sub)
     return parser
 
 

@@ -77,6 +77,14 @@ def test_figures_are_real_measurements_beside_baselines(smoke: dict[str, Any]) -
     assert -1.0 < wd["silent_beyond_timeout_ms"]["p50"]["value"] < 500
     assert 0 <= wd["close_to_zeros_ms"]["p50"]["value"] < 500
 
+    arena = smoke["arena"]
+    for key in ("world_step_us", "scan_level_us", "scan_tilted_us",
+                "scan_tilted_gimbal_moving_us", "scan_standing_still_us"):
+        p50 = arena[key]["p50"]
+        assert p50["value"] > 0 and p50["baseline"] > 0 and p50["ratio"] is not None
+    assert arena["beams_with_echo"]["tilted"] > 900
+    assert arena["mission_world_and_lidar_cpu_s"] > 0
+
     st = smoke["startup"]
     assert st["start_to_ready_ms"]["median"]["value"] > st["start_to_ready_ms"]["median"][
         "baseline"] > 0

@@ -81,7 +81,7 @@ def test_right_wheels_are_mirrored() -> None:
 
 def test_backward_and_heading_frame() -> None:
     w = MarteWorld()
-    w.place(3.0, 1.94, 90.0)  # facing +y
+    w.place(3.0, 1.94, 90.0)  # yaw 90 faces +y, the left side of the arena
     forward(w)
     run(w, 1.0)
     assert w.y > 1.94 + 0.15
@@ -94,24 +94,35 @@ def test_backward_and_heading_frame() -> None:
 def test_spin_in_place_clockwise_and_counter_clockwise() -> None:
     w = MarteWorld()
     w.place(3.0, 1.94, 0.0)
-    drive(w, 1.0, 1.0)  # left forward, right backward: turn right = clockwise = + yaw
+    drive(w, 1.0, 1.0)  # left forward, right backward: turn right = clockwise = - yaw
     run(w, 1.0)
-    assert w.heading_deg > 15.0
+    assert w.heading_deg < -15.0
     assert math.hypot(w.x - 3.0, w.y - 1.94) < 1e-9
     h = w.heading_deg
     drive(w, -1.0, -1.0)
     run(w, 2.0)
-    assert w.heading_deg < h - 15.0
+    assert w.heading_deg > h + 15.0
     assert math.hypot(w.x - 3.0, w.y - 1.94) < 1e-9
 
 
-def test_turning_right_while_driving_curves_toward_plus_y() -> None:
+def test_turning_right_while_driving_curves_toward_minus_y() -> None:
     w = MarteWorld()
     w.place(3.0, 1.94, 0.0)
     drive(w, 1.0, -0.5)  # left faster than right
     run(w, 2.0)
+    assert w.heading_deg < -5.0
+    assert w.y < 1.94
+
+
+def test_turning_left_increases_yaw_and_curves_toward_plus_y() -> None:
+    """SPEC 6.1's frame: +y on the left facing +x, yaw counter-clockwise."""
+    w = MarteWorld()
+    w.place(3.0, 1.94, 0.0)
+    drive(w, 0.5, -1.0)  # right faster than left
+    run(w, 2.0)
     assert w.heading_deg > 5.0
     assert w.y > 1.94
+    assert w.imu_truth().angular_velocity[2] > 0.0
 
 
 def test_walls_clamp_every_side() -> None:
@@ -168,12 +179,12 @@ def test_buttons_close_when_backing_into_the_wall() -> None:
 
 def test_one_button_when_angled() -> None:
     w = MarteWorld()
-    h = math.radians(5.0)  # nose turned toward +y: the rear-right corner is nearer the wall
+    h = math.radians(5.0)  # nose turned right (clockwise): the rear-right corner is nearer
     x = 0.6 * math.cos(h) + 0.375 * math.sin(h) + 0.005
-    w.place(x, 1.94, 5.0)
+    w.place(x, 1.94, -5.0)
     assert w.read_digital("base.r_button")
     assert not w.read_digital("base.l_button")
-    w.place(x, 1.94, -5.0)
+    w.place(x, 1.94, 5.0)
     assert w.read_digital("base.l_button")
     assert not w.read_digital("base.r_button")
 
@@ -403,6 +414,8 @@ def test_dump_over_collector_delivers() -> None:
     (3.0, 1.94, 0.0),  # middle of the arena
     (0.6, 0.40, 0.0),  # at the wall but beside the collector
     (0.8, 1.94, 0.0),  # 0.2 m short of the wall
+    (0.76, 1.94, 0.0),  # 0.16 m short: just beyond SPEC 6.1's 0.15 m
+    (0.6, 1.94 - 0.5, 0.0),  # rear half outside the collector's width (it spans 1.115..2.765)
     (1.5, 1.94, 180.0),  # facing the wall: the rear is away from it
 ])
 def test_dump_elsewhere_spills(x: float, y: float, heading: float) -> None:

@@ -1,0 +1,233 @@
+"""World files (`--world FILE`, SPEC 6.1): a fixed layout, so a team can replay a real run.
+
+    start: {box: left, heading: 90}        # optional x, y (m) and yaw (deg) pin the pose
+    rocks:   [{x: 2.10, y: 0.90, d: 0.25}, {x: 3.30, y: 2.60, d: 0.12, height: 0.10}]
+    craters: [{x: 3.90, y: 1.10, d: 0.30, depth: 0.25}]
+    description: any text                  # optional
+
+Any layout inside the arena is accepted, not only the competition's (another competition's
+field, a test course): `arena.rule_problems` says where it departs from the rules. Every error
+names the file, the line, the key path and what was expected, all of them in one pass:
+`world.yaml:3: rocks[1].d: expected a diameter in metres > 0, got 'big'`.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+from firmware_like import yaml_lines
+from firmware_like.arena import (
+    HEADINGS_DEG,
+    START_BOXES,
+    Crater,
+    Layout,
+    Rock,
+    StartSpec,
+    footprint_inside,
+)
+from firmware_like.arena_params import ArenaParams
+from firmware_like.marte_params import MarteParams
+from firmware_like.yaml_lines import LinedList, LinedMap
+
+
+class WorldError(ValueError):
+    """One problem in a world file, located like a config error: file:line: key: what."""
+
+    def __init__(self, message: str, *, file: str, line: int = 0, key: str = "") -> None:
+        self.file, self.line, self.key, self.detail = file, line, key, message
+        where = f"{file}:{line}" if line else file
+        super().__init__(": ".join(p for p in (where, key, message) if p))
+
+
+class WorldFileError(ValueError):
+    """Every problem found in one world file; `errors` lists them, str() has one a line."""
+
+    def __init__(self, errors: list[WorldError]) -> None:
+        self.errors = errors
+        super().__init__("\n".join(str(e) for e in errors))
+
+
+def load_world(path: str | Path, mp: MarteParams | None = None,
+               ap: ArenaParams | None = None) -> Layout:
+    """Read and check a world file; raises WorldFileError listing every problem."""
+    name = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise WorldFileError([WorldError(f"cannot read: {exc.strerror}", file=name)]) from exc
+    except UnicodeDecodeError as exc:
+        raise WorldFileError([WorldError("cannot read: not UTF-8 text", file=name)]) from exc
+    return parse_world(text, name, mp, ap)
+
+
+def parse_world(text: str, name: str = "world.yaml", mp: MarteParams | None = None,
+                ap: ArenaParams | None = None) -> Layout:
+    """Check world-file text; returns the Layout or raises WorldFileError."""
+    checker = _Checker(name, mp or MarteParams(), ap or ArenaParams())
+    layout = checker.world(text)
+    if checker.errors or layout is None:
+        raise WorldFileError(checker.errors)
+    return layout
+
+
+_TOP = ("start", "rocks", "craters", "description")
+_START = ("box", "heading", "x", "y", "yaw")
+_ROCK = ("x", "y", "d", "height")
+_CRATER = ("x", "y", "d", "depth")
+
+
+class _Checker:
+    """Walks the YAML tree collecting every error instead of stopping at the first."""
+
+    def __init__(self, file: str, mp: MarteParams, ap: ArenaParams) -> None:
+        self.file, self.mp, self.ap = file, mp, ap
+        self.errors: list[WorldError] = []
+
+    def err(self, key: str, line: int, message: str) -> None:
+        self.errors.append(WorldError(message, file=self.file, line=line, key=key))
+
+    def world(self, text: str) -> Layout | None:
+        try:
+            root = yaml_lines.load(text)
+        except yaml_lines.YamlSyntaxError as exc:
+            self.err("", exc.line, exc.problem)
+            return None
+        if root is None:
+            root = LinedMap()
+            root.line = 1
+        if not isinstance(root, LinedMap):
+            self.err("", 1, f"expected a mapping with start, rocks and craters, got "
+                     f"{yaml_lines.kind(root)}")
+            return None
+        self.keys(root, "", _TOP)
+        start = self.start(root)
+        rocks = tuple(r for r in self.items(root, "rocks", self.rock) if isinstance(r, Rock))
+        craters = tuple(c for c in self.items(root, "craters", self.crater)
+                        if isinstance(c, Crater))
+        desc = root.get("description")
+        if desc is not None and not isinstance(desc, str):
+            self.err("description", root.lines.get("description", root.line),
+                     f"expected text, got {yaml_lines.kind(desc)}")
+        return Layout(rocks, craters, start, source=self.file)
+
+    def keys(self, node: LinedMap, path: str, allowed: tuple[str, ...]) -> None:
+        prefix = f"{path}." if path else ""
+        for key, line in node.duplicates:
+            self.err(f"{prefix}{key}", line, "key given twice")
+        for key in node:
+            if key not in allowed:
+                self.err(f"{prefix}{key}", node.lines.get(key, node.line),
+                         f"unknown key (expected one of: {', '.join(allowed)})")
+
+    def number(self, node: LinedMap, key: str, path: str, what: str, *, required: bool,
+               lo: float | None = None, lo_open: bool = False) -> float | None:
+        line = node.lines.get(key, node.line)
+        if key not in node:
+            if required:
+                self.err(f"{path}.{key}", node.line, f"missing; expected {what}")
+            return None
+        value = node[key]
+        bad = isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(
+            value)
+        if not bad and lo is not None:
+            bad = value <= lo if lo_open else value < lo
+        if bad:
+            self.err(f"{path}.{key}", line, f"expected {what}, got {yaml_lines.kind(value)}")
+            return None
+        return float(value)
+
+    def start(self, root: LinedMap) -> StartSpec | None:
+        if "start" not in root:
+            return None
+        node = root["start"]
+        line = root.lines.get("start", root.line)
+        if not isinstance(node, LinedMap):
+            self.err("start", line, f"expected a mapping like {{box: left, heading: 90}}, "
+                     f"got {yaml_lines.kind(node)}")
+            return None
+        self.keys(node, "start", _START)
+        box = node.get("box")
+        if box not in START_BOXES:
+            where = node.lines.get("box", node.line)
+            got = "missing" if "box" not in node else f"got {yaml_lines.kind(box)}"
+            self.err("start.box", where, f"expected left or right, {got}")
+            box = None
+        heading = node.get("heading")
+        ok_heading = (not isinstance(heading, bool) and isinstance(heading, int | float)
+                      and heading in HEADINGS_DEG)
+        if not ok_heading:
+            where = node.lines.get("heading", node.line)
+            got = "missing" if "heading" not in node else f"got {yaml_lines.kind(heading)}"
+            self.err("start.heading", where, f"expected one of 0, 90, 180, 270 (degrees), {got}")
+        x = self.number(node, "x", "start", "an x in metres", required=False)
+        y = self.number(node, "y", "start", "a y in metres", required=False)
+        yaw = self.number(node, "yaw", "start", "a yaw in degrees", required=False)
+        if box is None or not isinstance(heading, int | float) or not ok_heading:
+            return None
+        spec = StartSpec(str(box), float(heading), x, y, yaw)
+        if x is not None and y is not None:
+            yaw_rad = math.radians(yaw if yaw is not None else float(heading))
+            arena = (0.0, self.mp.arena_length, 0.0, self.mp.arena_width)
+            if not footprint_inside(x, y, yaw_rad, arena, self.mp):
+                self.err("start", line, f"the footprint at x {x:g}, y {y:g}, yaw "
+                         f"{math.degrees(yaw_rad):g} is not wholly inside the "
+                         f"{self.mp.arena_length} x {self.mp.arena_width} m arena")
+        return spec
+
+    def items(self, root: LinedMap, key: str, check: Any) -> list[object]:
+        if key not in root or root[key] is None:
+            return []
+        seq = root[key]
+        line = root.lines.get(key, root.line)
+        if not isinstance(seq, LinedList):
+            self.err(key, line, f"expected a list of {{x, y, d}} mappings, got "
+                     f"{yaml_lines.kind(seq)}")
+            return []
+        out: list[object] = []
+        for i, item in enumerate(seq):
+            path = f"{key}[{i}]"
+            if not isinstance(item, LinedMap):
+                self.err(path, seq.lines[i], f"expected a mapping like {{x: 2.1, y: 0.9, "
+                         f"d: 0.25}}, got {yaml_lines.kind(item)}")
+                continue
+            out.append(check(item, path))
+        return out
+
+    def disc(self, node: LinedMap, path: str, allowed: tuple[str, ...],
+             ) -> tuple[float, float, float] | None:
+        self.keys(node, path, allowed)
+        x = self.number(node, "x", path, "an x in metres", required=True)
+        y = self.number(node, "y", path, "a y in metres", required=True)
+        d = self.number(node, "d", path, "a diameter in metres > 0", required=True, lo=0.0,
+                        lo_open=True)
+        if x is None or y is None or d is None:
+            return None
+        r = d / 2.0
+        if x - r < 0 or x + r > self.mp.arena_length or y - r < 0 or y + r > self.mp.arena_width:
+            self.err(path, node.line, f"the disc at x {x:g}, y {y:g}, d {d:g} is not wholly "
+                     f"inside the {self.mp.arena_length} x {self.mp.arena_width} m arena")
+            return None
+        return x, y, d
+
+    def rock(self, node: LinedMap, path: str) -> Rock | None:
+        disc = self.disc(node, path, _ROCK)
+        height = self.number(node, "height", path, "a height in metres > 0", required=False,
+                             lo=0.0, lo_open=True)
+        if disc is None:
+            return None
+        x, y, d = disc
+        return Rock(x, y, d, height if height is not None
+                    else d * self.ap.default_rock_height_ratio)
+
+    def crater(self, node: LinedMap, path: str) -> Crater | None:
+        disc = self.disc(node, path, _CRATER)
+        depth = self.number(node, "depth", path, "a depth in metres > 0", required=False,
+                            lo=0.0, lo_open=True)
+        if disc is None:
+            return None
+        x, y, d = disc
+        if depth is None:
+            depth = min(self.ap.crater_depth_max, d * self.ap.default_crater_depth_ratio)
+        return Crater(x, y, d, depth)
