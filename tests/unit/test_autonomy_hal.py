@@ -43,8 +43,17 @@ def test_unknown_names_list_the_valid_ones() -> None:
     with pytest.raises(ValueError, match=r"unknown imu driver 'xsens' \(expected one of: "
                                          r"phidget, sim\)"):
         driver_class("imu", "xsens")
-    with pytest.raises(ValueError, match="expected one of: gimbal, imu"):
+    with pytest.raises(ValueError,
+                       match=r"unknown lidar driver 'sick' \(expected one of: hokuyo\)"):
+        driver_class("lidar", "sick")
+    with pytest.raises(ValueError, match="expected one of: gimbal, imu, lidar"):
         driver_class("radar", "sim")
+
+
+def test_the_lidar_is_registered_under_its_driver_name() -> None:
+    from ramp.autonomy.hal.lidar import Lidar
+
+    assert issubclass(driver_class("lidar", "hokuyo"), Lidar)
 
 
 # -- IMU ---------------------------------------------------------------------------------------

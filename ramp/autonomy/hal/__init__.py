@@ -14,6 +14,9 @@ import importlib
 from typing import Any
 
 DRIVERS: dict[str, dict[str, tuple[str, str]]] = {
+    "lidar": {
+        "hokuyo": ("ramp.autonomy.hal.hokuyo", "HokuyoLidar"),
+    },
     "imu": {
         "phidget": ("ramp.autonomy.hal.phidget_spatial", "PhidgetImu"),
         "sim": ("ramp.autonomy.hal.sim", "SimImu"),
@@ -26,7 +29,7 @@ DRIVERS: dict[str, dict[str, tuple[str, str]]] = {
 
 
 def driver_class(kind: str, name: str) -> Any:
-    """The class registered for `kind` (`imu`, `gimbal`) as `name`; ValueError lists the
+    """The class registered for `kind` (`lidar`, `imu`, `gimbal`) as `name`; ValueError lists the
     valid names."""
     try:
         table = DRIVERS[kind]
