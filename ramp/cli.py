@@ -144,6 +144,8 @@ def build_parser() -> argparse.ArgumentParser:
     check = sub.add_parser("check", help="validate a config file without touching hardware")
     check.add_argument("file", nargs="?", default="ramp.yaml")
     check.set_defaults(func=cmd_check)
+    from ramp.recorder.logcli import add_log_parser  # `ramp log summary|plot FILE.mcap`
+    add_log_parser(sub)
     return parser
 
 
