@@ -142,9 +142,9 @@ def plot(data: PlotData, out: Path, title: str = "") -> Path:
         panels.append((f"commands to {bus} (duty)", series, True))
     order = [*PROPERTY_PANELS, *sorted(set(data.props) - set(PROPERTY_PANELS))]
     for prop in order:
-        series = data.props.get(prop)
-        if series and not _binary(series):
-            panels.append((PROPERTY_PANELS.get(prop, prop), series, False))
+        by_label = data.props.get(prop, {})
+        if by_label and not _binary(by_label):
+            panels.append((PROPERTY_PANELS.get(prop, prop), by_label, False))
     if data.late:
         panels.append(("tick lateness (µs)", data.late, False))
     if not panels:
