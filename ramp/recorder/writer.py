@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
+import io
 import logging
 import os
 import re
@@ -136,6 +137,8 @@ class SegmentWriter:
         stamp = dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%SZ")  # a label only
         path = self.directory / f"ramp-{index:06d}-{stamp}.mcap"
         f = self.opener(path)
+        if isinstance(f, io.RawIOBase):  # buffer it here, so closing it flushes what mcap wrote
+            f = io.BufferedWriter(f)
         try:
             mcap = Writer(f, compression=self.compression, chunk_size=4 << 20)
             mcap.start(profile="", library=f"ramp {__version__} (mcap-python)")
