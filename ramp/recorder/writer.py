@@ -15,9 +15,8 @@ synced) when it reaches `CHUNK_BYTES`.
 
 The GIL: this thread's Python work (MCAP framing) holds the interpreter lock, and the tick
 thread waking from `select` must wait for it. So the thread works in short slices
-(`SLICE_RECORDS`) with a real pause between them, chunks stay small, and no per-message
-index is written (mcap-python builds it in one long Python loop per chunk); compression,
-checksums and writes run in C.
+(`SLICE_RECORDS`) with a real pause between them, and chunks stay small (mcap-python writes
+a chunk's message index in one Python loop); compression, checksums and writes run in C.
 """
 
 from __future__ import annotations
@@ -48,17 +47,17 @@ Record = tuple[str, float, bytes]
 Opener = Callable[[Path], IO[bytes]]
 
 FILE_RE = re.compile(r"^ramp-(\d{6,})-[0-9TZ]+\.mcap$")
-SLICE_RECORDS = 16       # records framed between two pauses: ~70 us of CPU, 0.7 ms at most
-                         # when a 64 KiB chunk is closed in the slice (measured, 2 cores)
+SLICE_RECORDS = 16       # records framed between two pauses: ~75 us of CPU, 0.9 ms at most
+                         # when a chunk is closed in the slice (measured, 2 cores)
 SLICE_PAUSE_S = 0.0002   # a real sleep, so a tick waiting for the interpreter lock gets it
 POLL_S = 0.05            # how often the thread looks at the queue when it is idle
 RETRY_S = 5.0            # after a write error, how long until a new file is tried
-CHUNK_BYTES = 64 << 10   # a chunk is closed at this size (before compression), or on time
-RECORD_OVERHEAD = 31     # bytes of MCAP framing per message (uncompressed)
-#: Chunk indexes (readers find chunks by time) but no per-message indexes: mcap-python writes
-#: those in one Python loop per chunk that held the interpreter lock for milliseconds, and a
-#: reader finds every message of a 0.5 s chunk by reading the chunk anyway.
-INDEXES = IndexType.CHUNK | IndexType.METADATA | IndexType.ATTACHMENT
+CHUNK_BYTES = 32 << 10   # a chunk is closed at this size (before compression), or on time
+RECORD_OVERHEAD = 47     # bytes of MCAP framing and message index per message (uncompressed)
+#: Every index, message indexes included: Foxglove's reader (@mcap/core) refuses a chunk
+#: index without them. mcap-python writes them in one Python loop per chunk, which is why
+#: chunks stay small (CHUNK_BYTES).
+INDEXES = IndexType.ALL
 COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                "none": CompressionType.NONE}
 

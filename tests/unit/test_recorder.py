@@ -96,6 +96,9 @@ def test_every_channel_is_present_with_a_valid_schema_and_valid_messages(
         doc = json.loads(schema.data)
         jsonschema.validators.validator_for(doc).check_schema(doc)
         assert doc["title"] == schema.name
+    # Foxglove's reader (@mcap/core) refuses a chunk index without message indexes.
+    assert summary.chunk_indexes
+    assert all(ci.message_index_offsets for ci in summary.chunk_indexes)
     seen = set()
     for topic, _, _, data, schema in got["messages"]:
         jsonschema.validate(data, json.loads(schema.data))
