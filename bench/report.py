@@ -129,8 +129,9 @@ def render(doc: dict[str, Any]) -> str:
             out.append(f"| {kind} | {_num(cell['value'])} ns | {_num(cell['baseline'])} ns | "
                        f"{_num(cell['ratio'])} | {e[kind]['baseline_is']} |")
         w = e["writer"]
-        out += ["", f"Writer thread (off the tick): {w['us_per_record']} µs per record to frame, "
-                f"compress and write; {w['bytes_per_record']} bytes per record on disk.", "",
+        out += ["", f"Writer thread (off the tick): {w['cpu_us_per_record']} µs of CPU per record "
+                f"to frame, compress and write ({w['us_per_record']} µs of wall time with its "
+                f"pauses); {w['bytes_per_record']} bytes per record on disk.", "",
                 f"Tick at {t['rate_hz']:g} Hz for {t['duration_s']:g} s with "
                 f"{t['records_per_s']:,} records/s; three processes at the same time, baseline: "
                 "the same loop with the recorder off.", "", HEAD]
