@@ -41,7 +41,8 @@ class RecorderConfig:
             raise ConfigError(exc.message, key=f"recorder.{exc.key}") from None
         if not checked["dir"].strip():
             raise ConfigError("'' is not a directory for the MCAP files", key="recorder.dir")
-        object.__setattr__(self, "max_mb", checked["max_mb"])
+        for key, value in checked.items():  # as checked: 5 -> 5.0 for max_mb, and so on
+            object.__setattr__(self, key, value)
 
     @property
     def max_bytes(self) -> int:

@@ -80,7 +80,15 @@ class RecorderError(RampError):
 
 
 class Recorder:
-    """Records a run into rotating MCAP files; cheap to call from the tick."""
+    """Records a run into rotating MCAP files; cheap to call from the tick.
+
+    `origin_ns`: the wall clock (ns since the epoch) at `start` (default: read then; tests
+    pass one so files repeat). `opener`: opens each new file (tests pass slow or failing
+    ones). `queue_records`/`queue_bytes`: what may wait for the writer before records are
+    dropped (20,000 records is about 14 s of a busy run). `flush_s`: the longest a record
+    waits in an open chunk. `retry_s`: after a write error, when a new file is tried.
+    `session`: extra key-values for each file's `ramp` metadata record.
+    """
 
     def __init__(self, config: RecorderConfig, *, origin_ns: int | None = None,
                  opener: Opener | None = None, queue_records: int = 20_000,
@@ -106,6 +114,7 @@ class Recorder:
         self._thread: WriterThread | None = None
         self._dropping = False
         self.timebase: TimeBase | None = None
+        #: True between `start` and `close`: the tick's calls record (else they do nothing).
         self.recording = False
 
     # -- lifecycle ----------------------------------------------------------------------------

@@ -398,6 +398,7 @@ def test_config_block_is_checked_with_key_paths() -> None:
     cfg = RecorderConfig.from_mapping({"dir": "/var/lib/ramp/rec"})
     assert (cfg.max_mb, cfg.keep, cfg.max_bytes) == (100.0, 20, 100_000_000)
     assert apply_fields(RECORDER_FIELDS, {"dir": "d", "max_mb": 5})["max_mb"] == 5.0
+    assert isinstance(RecorderConfig("d", max_mb=5).max_mb, float)
     with pytest.raises(ConfigError, match=r"recorder\.keep: 0 is not how many files"):
         RecorderConfig.from_mapping({"dir": "d", "keep": 0})
     with pytest.raises(ConfigError, match=r"recorder\.dir: missing"):
