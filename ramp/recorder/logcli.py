@@ -79,7 +79,8 @@ def cmd_plot(args: argparse.Namespace) -> int:
     try:
         import matplotlib  # noqa: F401
     except ImportError:
-        print("ramp log plot needs matplotlib: pip install 'ramp[log]'", file=sys.stderr)
+        print("ramp log plot needs matplotlib, the `log` extra: pip install '.[log]' in a RAMP "
+              "checkout", file=sys.stderr)
         return 2
     from ramp.recorder.plot import PlotData, plot
 

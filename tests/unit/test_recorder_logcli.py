@@ -5,6 +5,7 @@ two clients, two owners, one watchdog trip, one fault, two overruns, the Base mo
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import pytest
@@ -164,3 +165,14 @@ def test_missing_and_foreign_files_are_refused_with_status_2(
     bad.write_text("not a recording at all")
     assert main(["plot", str(bad), "-o", str(tmp_path / "x.png")]) == 2
     assert "not an MCAP file" in capsys.readouterr().err
+
+
+def test_plot_without_matplotlib_says_what_to_install(
+        recording: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # as if the `log` extra were absent
+    assert main(["plot", str(recording), "-o", str(tmp_path / "x.png")]) == 2
+    assert "pip install '.[log]'" in capsys.readouterr().err
+    monkeypatch.setitem(sys.modules, "tqdm", None)
+    assert main(["summary", str(recording), "--progress"]) == 0  # no bar, same summary
+    assert "watchdog   1 trip" in capsys.readouterr().out
