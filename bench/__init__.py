@@ -15,5 +15,5 @@ AUTONOMY_SECTIONS: tuple[str, ...] = (
     ("autonomy_sensors", "lidar_codec") if find_spec("ramp.autonomy") is not None else ())
 
 #: Benchmark names, in the order they run.
-SECTIONS = ("tick", "round_trip", "command_to_wire", "watchdog_to_wire", "startup", "arena",
-            *AUTONOMY_SECTIONS)
+SECTIONS = ("tick", "round_trip", "command_to_wire", "watchdog_to_wire", "startup", "recorder",
+            "arena", *AUTONOMY_SECTIONS)

@@ -152,6 +152,34 @@ def render(doc: dict[str, Any]) -> str:
                 _row("scan standing still, median", a["scan_standing_still_us"]["p50"], " µs"),
                 "", f"A 10-minute mission's physics and LIDAR (60 000 steps, 24 000 scans): "
                 f"{a['mission_world_and_lidar_cpu_s']} s of CPU.", ""]
+    rc = doc.get("recorder")
+    if rc and "error" not in rc:
+        e, t = rc["encode"], rc["tick"]
+        out += ["**recorder** (encoding on the tick, ns per record, median of batches of 100; "
+                "baseline: the supervisor's own work on the same item)", "",
+                "| record | recorder | baseline | ratio | baseline is |", "|---|---|---|---|---|"]
+        for kind in ("mcp_in", "mcp_out", "health", "module_rows", "command", "event"):
+            cell = e[kind]["ns_per_record"]["p50"]
+            out.append(f"| {kind} | {_num(cell['value'])} ns | {_num(cell['baseline'])} ns | "
+                       f"{_num(cell['ratio'])} | {e[kind]['baseline_is']} |")
+        w = e["writer"]
+        out += ["", f"Writer thread (off the tick): {w['cpu_us_per_record']} µs of CPU per record "
+                f"to frame, compress and write ({w['us_per_record']} µs of wall time with its "
+                f"pauses); {w['bytes_per_record']} bytes per record on disk.", "",
+                f"Tick at {t['rate_hz']:g} Hz for {t['duration_s']:g} s with "
+                f"{t['records_per_s']:,} records/s; three processes at the same time, baseline: "
+                "the same loop with the recorder off.", "", HEAD]
+        for key, label in (("on", "recorder on"),
+                           ("slow_disk", f"slow disk ({t['slow_disk_bytes_per_s']:,} B/s)")):
+            r = t[key]
+            out += _pcts(f"{label}: lateness", r["late_us"], " µs", ("p50", "p99", "max"))
+            out += [_row(f"{label}: overruns", r["overruns"]),
+                    _row(f"{label}: CPU % of a core", r["cpu_pct"])]
+        sd = t["slow_disk"]
+        out += ["", f"Slow disk: {sd['dropped']:,} records dropped and counted, "
+                f"{sd['written']:,} taken by the writer, the queue ({t['queue_records']:,} "
+                f"records) full at the end; recorder on: {t['on']['dropped']} dropped, "
+                f"{t['on']['bytes_per_record']} bytes per record on disk.", ""]
     return "\n".join(out)
 
 

@@ -147,6 +147,9 @@ def build_parser() -> argparse.ArgumentParser:
     from ramp.simulation.commands import add_sim_parser  # `ramp sim …`: lazy, light to import
 
     add_sim_parser(sub)
+    from ramp.recorder.logcli import add_log_parser  # `ramp log summary|plot FILE.mcap`
+
+    add_log_parser(sub)
     return parser
 
 

@@ -84,6 +84,12 @@ def test_figures_are_real_measurements_beside_baselines(smoke: dict[str, Any]) -
         assert p50["value"] > 0 and p50["baseline"] > 0 and p50["ratio"] is not None
     assert arena["beams_with_echo"]["tilted"] > 900
     assert arena["mission_world_and_lidar_cpu_s"] > 0
+    rc = smoke["recorder"]
+    for kind in ("mcp_in", "mcp_out", "health", "module_rows", "command", "event"):
+        assert rc["encode"][kind]["ns_per_record"]["p50"]["value"] > 0
+    assert rc["encode"]["writer"]["records"] == rc["encode"]["writer"]["of_queued"] > 0
+    assert rc["tick"]["on"]["written"] > 0 and rc["tick"]["on"]["ticks"] > 0
+    assert rc["tick"]["slow_disk"]["late_us"]["p50"]["baseline"] > 0
 
     st = smoke["startup"]
     assert st["start_to_ready_ms"]["median"]["value"] > st["start_to_ready_ms"]["median"][
