@@ -50,13 +50,14 @@ class Trench:
 
 @dataclass(frozen=True)
 class DigConfig:
-    """How a dig uses ground. ASSUMPTIONS (the thesis gives no trench size): the ladder cuts
-    a strip as wide as the robot, reaching `reach_m` beyond the front edge, lengthened by the
-    creep."""
+    """How a dig uses ground. ASSUMPTIONS (the thesis gives no ladder size): the ladder cuts
+    a strip `trench_width_m` wide, centred on the robot, from its front edge to `reach_m`
+    beyond it, lengthened by the creep."""
 
     dig_start_x_m: float = OBSTACLE_END_X_M  # SPEC 6.1: digging region 4.44 <= x <= 7.38
     creep_m: float = 0.30  # forward creep while digging
     reach_m: float = 0.25  # cut beyond the front edge
+    trench_width_m: float = 0.50  # narrower than the 0.75 m body
     spacing_m: float = 0.20  # between trenches
     wall_gap_m: float = 0.20  # between a trench and the far wall
     step_m: float = 0.10  # candidate grid
@@ -84,10 +85,9 @@ class DigSites:
         """The ground a dig from `pose` (yaw 0) cuts, creeping `crept_m` (default: planned)."""
         cfg = self.config
         creep = cfg.creep_m if crept_m is None else crept_m
-        robot = self.planner.config.robot
-        front = pose.x + robot.half_length_m
-        return Trench(front, pose.y - robot.half_width_m, front + creep + cfg.reach_m,
-                      pose.y + robot.half_width_m)
+        front = pose.x + self.planner.config.robot.half_length_m
+        half = 0.5 * cfg.trench_width_m
+        return Trench(front, pose.y - half, front + creep + cfg.reach_m, pose.y + half)
 
     def mark_dug(self, spot: DigSpot | Pose, crept_m: float | None = None) -> Trench:
         """Record a dig (call it with how far the robot really crept, when known)."""
