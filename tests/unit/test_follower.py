@@ -3,6 +3,7 @@ MARTE numbers) along paths to their goals, forwards and backwards; the command m
 
 from __future__ import annotations
 
+import json
 import math
 import random
 
@@ -20,6 +21,7 @@ from ramp.autonomy.planning import (
 )
 from ramp.autonomy.robot_model import MARTE, drive_command, wheel_mix
 from ramp.functional.base_drive import mix
+from ramp.simulation.referee import referee
 from tests.unit.rmc_layouts import random_layout, random_start, sampled_clearance
 
 PARAMS = MarteParams()
@@ -152,6 +154,14 @@ def test_planned_trip_and_docking_driven_by_the_model_keep_the_footprint_clear(
     # Ends with the rear on the wall, centred on the collector, square to the wall.
     rear_x = robot.x - 0.6 * math.cos(robot.yaw)
     assert rear_x < 0.04 and abs(robot.y - 1.94) < 0.03
+    # The referee, reading the drive as a trace, finds nothing either.
+    head = {"arena": {}, "robot": {"length": 1.2, "width": 0.75},
+            "rocks": [{"x": d.x, "y": d.y, "d": 2 * d.radius} for d in arena.obstacles[:3]],
+            "craters": [{"x": d.x, "y": d.y, "d": 2 * d.radius} for d in arena.obstacles[3:]]}
+    rows = [{"t": 0.1 * k, "x": x, "y": y, "yaw": math.degrees(a), "lift": 0, "bin_kg": 0,
+             "delivered_kg": 0, "state": "drive"} for k, (x, y, a) in enumerate(robot.trail)]
+    report = referee([json.dumps(head)] + [json.dumps(r) for r in rows])
+    assert (report.collisions, report.crater_entries) == (0, 0), report.events
     start_gap = sampled_clearance(arena, start.x, start.y, start.yaw)
     for x, y, yaw in robot.trail[::3]:
         gap = sampled_clearance(arena, x, y, yaw)
