@@ -9,4 +9,4 @@ here asserts a threshold: the suite reports, people judge.
 from __future__ import annotations
 
 #: Benchmark names, in the order they run.
-SECTIONS = ("tick", "round_trip", "command_to_wire", "watchdog_to_wire", "startup")
+SECTIONS = ("tick", "round_trip", "command_to_wire", "watchdog_to_wire", "startup", "planner")

@@ -177,7 +177,7 @@ def test_dig_spots_never_repeat_stay_in_the_digging_region_and_are_reachable() -
     planner = Planner(arena)
     sites = DigSites(planner)
     dock = docking_approaches(planner)[0].approach
-    trips = []
+    rows = []
     for _ in range(6):
         spot, plan = sites.next_spot(dock, reference=dock.xy)
         assert spot is not None and plan.ok, plan.reason
@@ -186,10 +186,10 @@ def test_dig_spots_never_repeat_stay_in_the_digging_region_and_are_reachable() -
         assert all(t.gap_to(old) >= sites.config.spacing_m for old in sites.dug)
         assert sampled_clearance(arena, *spot.pose.xy, 0.0) >= 0.025
         sites.mark_dug(spot)
-        trips.append(spot.trip_m)
+        rows.append(math.floor((spot.pose.x - (4.44 - 0.6)) / 0.55 + 1e-9))
     poses = {(s.x0, s.y0) for s in sites.dug}
     assert len(poses) == 6
-    assert trips == sorted(trips)  # nearest first: each new spot is no nearer than the last
+    assert rows == sorted(rows) and rows[0] == 0  # the row nearest the collector first
 
 
 def test_docking_approach_backs_straight_onto_the_wall_centred_on_the_collector() -> None:
@@ -212,3 +212,26 @@ def test_docking_approaches_shorten_when_an_obstacle_is_near_the_start_region() 
     assert approaches
     front = [d.approach.x + 0.6 for d in approaches]
     assert max(front) <= rock.x - rock.radius - 0.025 + 1e-9
+
+
+def test_a_gap_barely_wider_than_the_robot_is_found_by_searching_over_headings() -> None:
+    # SPEC 6.1's example world: the only way from the start region to the digging region is
+    # a 0.92 m gap between the crater at (2.40, 3.20) and the rock at (3.30, 2.60), passable
+    # only nearly square to it. The grid planner's turns never fit; the heading search does.
+    from ramp.autonomy.planning.plot import EXAMPLE_CRATERS, EXAMPLE_ROCKS
+
+    arena = ArenaMap.from_world(EXAMPLE_ROCKS, EXAMPLE_CRATERS)
+    planner = Planner(arena)
+    start, goal = Pose(0.75, 2.91, math.radians(90)), (4.3, 3.0)
+    assert not planner._levels[-1].plan(start, goal, 0.0).ok  # the grid planner alone fails
+    result = planner.plan(start, goal, 0.0)
+    assert result.ok, result.reason
+    assert result.margin_m == planner.config.min_margin_m
+    yaw = start.yaw
+    through_gap = False
+    for leg in result.legs:
+        for x, y, a in swept_poses(leg, yaw)[::2]:
+            assert sampled_clearance(arena, x, y, a) >= 0.015
+            through_gap |= 2.6 < x < 3.2 and 2.6 < y < 3.3
+        yaw = end_yaw(leg, yaw)
+    assert through_gap

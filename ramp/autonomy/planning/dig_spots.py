@@ -11,8 +11,10 @@ while the robot creeps forward. A spot is the pose where digging starts, facing 
   little, and the robot must not drive into its own holes);
 - its centre is reachable on the planner's grid.
 
-Candidates are ranked by the cost of the trip from a reference point (the docking approach,
-since every load goes there): one Dijkstra from the reference gives every candidate's trip.
+Candidates are ranked by row (bands across the arena as long as a trench, the band nearest
+the collector first, so trenches pack side by side) and within a row by the cost of the trip
+from a reference point (the docking approach, since every load goes there): one Dijkstra from
+the reference gives every candidate's trip.
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ from ramp.autonomy.arena import OBSTACLE_END_X_M
 from ramp.autonomy.planning.astar import dijkstra
 from ramp.autonomy.planning.geometry import Pose
 from ramp.autonomy.planning.planner import Planner, PlanResult
+
+SKIP_NEAR_FAILED_M = 0.5
 
 
 @dataclass(frozen=True)
@@ -96,17 +100,27 @@ class DigSites:
         self.dug.append(trench)
         return trench
 
-    def candidates(self, reference: tuple[float, float]) -> list[DigSpot]:
-        """Every acceptable spot, cheapest trip from `reference` first."""
+    def candidates(self, reference: tuple[float, float],
+                   reachable_from: tuple[float, float] | None = None) -> list[DigSpot]:
+        """Every acceptable spot, nearest row and cheapest trip from `reference` first; only
+        spots reachable from `reachable_from` too, when given."""
         cfg = self.config
         planner = self.planner
-        arena, grid = planner.arena, planner.grid
+        # Reachable at the smallest margin the planner accepts, from the free cell nearest the
+        # reference (which may itself stand close to a wall, like the docking approach).
+        arena, grid = planner.arena, planner.loosest_grid
         robot = planner.config.robot
         hl, hw = robot.half_length_m, robot.half_width_m
-        ref_cell = grid.cell_of(*reference)
+        ref_cell = grid.nearest_free_cell(*reference)
         if ref_cell is None:
-            raise ValueError(f"reference {reference} is outside the arena")
+            return []
         dist = dijkstra(grid.blocked, grid.cost, ref_cell)
+        if reachable_from is not None:
+            from_cell = grid.nearest_free_cell(*reachable_from)
+            if from_cell is None:
+                return []
+            dist = np.where(np.isfinite(dijkstra(grid.blocked, grid.cost, from_cell)), dist,
+                            math.inf)
         x_lo = cfg.dig_start_x_m - hl  # trench starts at the front edge
         x_hi = arena.length - cfg.wall_gap_m - cfg.reach_m - cfg.creep_m - hl
         y_lo, y_hi = hw + cfg.wall_gap_m, arena.width - hw - cfg.wall_gap_m
@@ -133,8 +147,11 @@ class DigSites:
                 if planner.clearance(creep).min() < planner.config.check_margin_m:
                     continue
                 spots.append(DigSpot(pose, trench, float(dist[cell]) * grid.resolution))
-        # Cheapest trip first; ties to the spot nearer the collector's line, then nearer x.
-        spots.sort(key=lambda s: (round(s.trip_m, 6), abs(s.pose.y - reference[1]), s.pose.x))
+        # Rows across the arena, the row nearest the collector first (short trips), so that
+        # trenches pack side by side instead of scattering; in a row, the cheapest trip first.
+        row = cfg.creep_m + cfg.reach_m
+        spots.sort(key=lambda s: (math.floor((s.pose.x - x_lo) / row + 1e-9),
+                                  round(s.trip_m, 6), abs(s.pose.y - reference[1]), s.pose.x))
         return spots
 
     def next_spot(self, start: Pose, reference: tuple[float, float] | None = None,
@@ -147,9 +164,17 @@ class DigSites:
         ref = reference if reference is not None else start.xy
         last = PlanResult((), "no acceptable digging spot is left (every one overlaps a "
                               "trench, an obstacle or a wall, or cannot be reached)")
-        for spot in self.candidates(ref)[:tries]:
+        failed: list[tuple[float, float]] = []
+        for spot in self.candidates(ref, reachable_from=start.xy):
+            if tries <= 0:
+                break
+            if any(math.hypot(spot.pose.x - fx, spot.pose.y - fy) < SKIP_NEAR_FAILED_M
+                   for fx, fy in failed):
+                continue  # a spot beside one the planner could not reach fails alike
+            tries -= 1
             result = self.planner.plan(start, spot.pose.xy, goal_yaw=spot.pose.yaw)
             if result.ok:
                 return spot, result
+            failed.append(spot.pose.xy)
             last = result
         return None, last

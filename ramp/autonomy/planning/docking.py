@@ -25,7 +25,7 @@ from ramp.autonomy.planning.path import Path
 from ramp.autonomy.planning.planner import Planner, PlanResult
 
 # Straight reverse lengths tried, longest first (m of travel from the approach to the wall).
-REVERSE_LENGTHS_M = (1.0, 0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3)
+REVERSE_LENGTHS_M = (1.0, 0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3, 0.2, 0.1)
 
 
 @dataclass(frozen=True)
@@ -40,7 +40,8 @@ class DockApproach:
 def docking_approaches(planner: Planner, *, collector_y: float = COLLECTOR_Y_M,
                        lengths: Sequence[float] = REVERSE_LENGTHS_M) -> list[DockApproach]:
     """Approaches whose whole straight reverse keeps the footprint clear of obstacles and of
-    the side walls (the x = 0 wall is the target), longest first."""
+    the side walls (the x = 0 wall is the target) by the planner's smallest check margin,
+    longest first."""
     robot = planner.config.robot
     half_collector = 0.5 * COLLECTOR_WIDTH_M
     if robot.half_width_m > half_collector:
@@ -53,7 +54,7 @@ def docking_approaches(planner: Planner, *, collector_y: float = COLLECTOR_Y_M,
                              max(2, round(length / planner.config.waypoint_spacing_m) + 1))
         leg = Path(points, reverse=True, final_yaw=None)
         clear, _pose = planner.legs_clearance([leg], 0.0, x0_wall=False)
-        if clear >= planner.config.check_margin_m:
+        if clear >= 0.5 * planner.config.min_margin_m:
             out.append(DockApproach(approach, leg, docked))
     return out
 

@@ -138,6 +138,15 @@ class OccupancyGrid:
     def centre_of(self, cell: Cell) -> tuple[float, float]:
         return ((cell[0] + 0.5) * self.resolution, (cell[1] + 0.5) * self.resolution)
 
+    def nearest_free_cell(self, x: float, y: float) -> Cell | None:
+        """The free cell whose centre is nearest (x, y), or None if every cell is blocked."""
+        free = np.argwhere(~self.blocked)
+        if len(free) == 0:
+            return None
+        centres = (free + 0.5) * self.resolution
+        k = int(np.argmin(np.hypot(centres[:, 0] - x, centres[:, 1] - y)))
+        return (int(free[k, 0]), int(free[k, 1]))
+
     def is_free(self, x: float, y: float) -> bool:
         cell = self.cell_of(x, y)
         return cell is not None and not bool(self.blocked[cell])

@@ -38,6 +38,12 @@ from ramp.autonomy.planning.geometry import (
     wrap_angle,
 )
 from ramp.autonomy.planning.grid import OccupancyGrid, PlannerConfig
+from ramp.autonomy.planning.lattice import (
+    LATTICE_TOLERANCE_M,
+    HeadingLattice,
+    steps_to_polylines,
+    sweep_is_clear,
+)
 from ramp.autonomy.planning.path import Path, densify, end_yaw, swept_poses
 
 Point = tuple[float, float]
@@ -46,7 +52,8 @@ ESCAPE_HEADINGS = 32  # turns in place of 11.25 degrees
 ESCAPE_STEP_M = 0.05
 ESCAPE_RADIUS_M = 2.0  # how far from the start the search may go
 ESCAPE_MAX_EXPANSIONS = 6000
-MAX_REPAIRS = 6
+MAX_REPAIRS = 4
+SHORTCUT_TRIES = 8  # exact sweep checks per vertex when shortcutting
 REPAIR_RADIUS_M = 0.5  # a failed turn makes A* pay to pass within this of it ...
 REPAIR_COST = 6.0  # ... up to this much extra per cell at the spot itself
 
@@ -90,6 +97,11 @@ class Planner:
         """The grid at the nominal margin."""
         return self._levels[0].grid
 
+    @property
+    def loosest_grid(self) -> OccupancyGrid:
+        """The grid at the smallest margin the planner will accept: what is reachable at all."""
+        return self._levels[-1].grid
+
     def clearance(self, poses: FloatArray, *, x0_wall: bool = True) -> FloatArray:
         return self._levels[0].clearance(poses, x0_wall=x0_wall)
 
@@ -106,9 +118,17 @@ class Planner:
         if first.ok or len(self._levels) == 1:
             return first
         second = self._levels[1].plan(start, goal, goal_yaw)
+        expanded = first.expanded + second.expanded
         if second.ok:
-            return replace(second, expanded=first.expanded + second.expanded)
-        return replace(first, expanded=first.expanded + second.expanded)
+            return replace(second, expanded=expanded)
+        if second.reason.startswith(("goal:", "start")):
+            return replace(second, expanded=expanded)
+        # Last resort: search over headings too, where the footprint fits at each.
+        third = self._levels[-1].plan_lattice(start, goal, goal_yaw)
+        if third.ok:
+            return replace(third, expanded=expanded + third.expanded)
+        return replace(second, reason=f"{second.reason}; searching over headings too: "
+                                      f"{third.reason}", expanded=expanded + third.expanded)
 
 
 class _MarginPlanner:
@@ -120,6 +140,7 @@ class _MarginPlanner:
         self.grid = OccupancyGrid.build(arena, config)
         robot = config.robot
         self._hl, self._hw = robot.half_length_m, robot.half_width_m
+        self._lattice: HeadingLattice | None = None
 
     # -- checks --------------------------------------------------------------------------------
     def clearance(self, poses: FloatArray, *, x0_wall: bool = True) -> FloatArray:
@@ -276,6 +297,9 @@ class _MarginPlanner:
                 if grid.line_cost(raw[i], raw[j]) <= cum[j] - cum[i] + 1e-6:
                     candidates.append(j)
             chosen = candidates[0]
+            if len(candidates) > SHORTCUT_TRIES:  # farthest first, then evenly nearer
+                picks = np.linspace(len(candidates) - 1, 0, SHORTCUT_TRIES).round().astype(int)
+                candidates = [candidates[k] for k in sorted(set(picks.tolist()))]
             for j in reversed(candidates):
                 if self._move_is_clear(raw[i], raw[j], yaw):
                     chosen = j
@@ -291,6 +315,77 @@ class _MarginPlanner:
         poses = np.vstack([rotation_poses(p, yaw, seg_yaw, math.radians(3.0)),
                            segment_poses(p, q, seg_yaw, 0.025)])
         return bool(self.clearance(poses).min() >= self.config.check_margin_m)
+
+    # -- the fallback over headings ----------------------------------------------------------
+    def plan_lattice(self, start: Pose, goal: Point, goal_yaw: float | None) -> PlanResult:
+        """Plan with the position-and-heading search (`lattice.py`), after getting clear of
+        the start if it has no room to turn."""
+        head: list[Path] = []
+        if not self.can_spin_at(start.x, start.y):
+            escape = self._escape(start)
+            if escape is not None and escape[0]:
+                head, clear_pose = escape
+                result = self._lattice_from(clear_pose, goal, goal_yaw)
+                if not result.ok:
+                    return result
+                legs = _merge(head + list(result.legs))
+                clear, _pose = self.legs_clearance(legs, start.yaw)
+                return PlanResult(tuple(legs), "", result.expanded, clear, self.config.margin_m)
+        return self._lattice_from(start, goal, goal_yaw)
+
+    def _lattice_from(self, start: Pose, goal: Point, goal_yaw: float | None) -> PlanResult:
+        cfg = self.config
+        if self._lattice is None:
+            self._lattice = HeadingLattice(self.arena, cfg, self.grid)
+        margin_start = min(cfg.check_margin_m, self._start_clearance(start)) - 1e-6
+        steps = self._lattice.search(start, goal, goal_yaw, margin_start)
+        if steps is None:
+            return PlanResult((), "no sequence of straight moves and turns in place fits the "
+                                  "footprint through")
+        legs: list[Path] = []
+        yaw = start.yaw
+        for points, reverse in steps_to_polylines(steps, self.grid, start, goal):
+            margin = margin_start if not legs else cfg.check_margin_m - LATTICE_TOLERANCE_M
+            vertices = self._shortcut_exact(points, yaw, reverse, margin)
+            leg = Path(densify(vertices, cfg.waypoint_spacing_m), reverse=reverse)
+            if self.legs_clearance([leg], yaw)[0] < margin:
+                # A shortcut changed the heading the robot reaches a later vertex with, and
+                # the turn there no longer fits: keep the search's own moves.
+                leg = Path(densify(points, cfg.waypoint_spacing_m), reverse=reverse)
+            legs.append(leg)
+            yaw = end_yaw(leg, yaw)
+        if not legs:  # already in the goal cell: at most a turn
+            legs.append(Path(np.array([start.xy, goal])))
+        last = legs[-1]
+        legs[-1] = Path(last.points, reverse=last.reverse, final_yaw=goal_yaw)
+        clear, pose = self.legs_clearance(legs, start.yaw)
+        if clear < min(margin_start, cfg.check_margin_m - LATTICE_TOLERANCE_M):
+            return PlanResult((), "the search over headings found a way the exact check "
+                                  f"rejects near ({pose[0]:.2f}, {pose[1]:.2f})")
+        return PlanResult(tuple(_merge(legs)), "", 0, clear, cfg.margin_m)
+
+    def _shortcut_exact(self, points: list[Point], yaw: float, reverse: bool,
+                        first_margin: float) -> list[Point]:
+        """Greedy shortcuts checked by the exact sweep alone (no grid: the disc model is what
+        failed here)."""
+        out = [points[0]]
+        i, n = 0, len(points)
+        while i < n - 1:
+            margin = first_margin if i == 0 else self.config.check_margin_m
+            picks = np.unique(np.linspace(n - 1, i + 1, min(n - 1 - i, 16)).round()
+                              .astype(int)).tolist()
+            chosen = i + 1
+            for j in sorted(picks, reverse=True):
+                if sweep_is_clear(self.arena, self.config, points[i], points[j], yaw, reverse,
+                                  margin):
+                    chosen = j
+                    break
+            p, q = points[i], points[chosen]
+            d = math.atan2(q[1] - p[1], q[0] - p[0])
+            yaw = wrap_angle(d + math.pi) if reverse else d
+            out.append(q)
+            i = chosen
+        return out
 
     # -- getting clear ---------------------------------------------------------------------------
     def _escape(self, start: Pose) -> tuple[list[Path], Pose] | None:
