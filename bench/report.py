@@ -180,6 +180,22 @@ def render(doc: dict[str, Any]) -> str:
                 f"{sd['written']:,} taken by the writer, the queue ({t['queue_records']:,} "
                 f"records) full at the end; recorder on: {t['on']['dropped']} dropped, "
                 f"{t['on']['bytes_per_record']} bytes per record on disk.", ""]
+    pl = doc.get("planner")
+    if pl and "error" not in pl:
+        g = pl["grid"]
+        out += [f"**planner** ({pl['queries']} random SPEC 6.1 layouts, start region to the far "
+                f"end of the digging region, grid {g['cells'][0]} x {g['cells'][1]} cells of "
+                f"{g['resolution_m']:g} m; baseline: BFS on the same grid for A*, A* alone for "
+                "the whole plan)", "", HEAD]
+        out += _pcts("A*", pl["astar_ms"], " ms", ("p50", "p99", "max"))
+        out += _pcts("whole plan (A*, shortcuts, footprint checks)", pl["plan_ms"], " ms",
+                     ("p50", "p99", "max"))
+        out += [_row("A* across the empty arena", pl["empty_arena_corner_to_corner_ms"],
+                     " ms"),
+                "", f"Plans found: {pl['plans_found']}/{pl['queries']}; A* expanded "
+                f"{_num(pl['astar_expanded']['p50'])} cells at p50 "
+                f"(max {_num(pl['astar_expanded']['max'])}); grid build p50 "
+                f"{_num(pl['grid_build_ms']['p50'])} ms.", ""]
     return "\n".join(out)
 
 
