@@ -50,10 +50,17 @@ def add_lidar_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.set_defaults(func=cmd_lidar)
 
 
+def add_campaign_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ramp.simulation.campaign import add_parser
+
+    add_parser(sub)
+
+
 #: Every `ramp sim` subcommand: name -> function adding its parser.
 SIM_COMMANDS: dict[str, Callable[[argparse._SubParsersAction[argparse.ArgumentParser]],
                                  None]] = {
     "lidar": add_lidar_parser,
+    "campaign": add_campaign_parser,
 }
 
 
