@@ -342,6 +342,9 @@ class ScriptedRobot:
                     self.log.append((index, text))
                     conn.sendall(self.answer(text).encode() + b"\n")
                     if self.interrupt_when(self.log):
+                        # One Ctrl-C only: the condition stays true for later lines, and a
+                        # second signal would land after the shell's handler is gone.
+                        self.interrupt_when = lambda log: False
                         signal.pthread_kill(threading.main_thread().ident or 0, signal.SIGINT)
 
     def answer(self, text: str) -> str:
