@@ -106,9 +106,7 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
         if backplane is not None:
             backplane.close()
         return 1
-    from ramp.stall_guard import StallGuard
-
-    guard = StallGuard(sup, config.stall_limit)
+    guard = sup.stall_guard
     guard.start()
     notifier.attach(sup)
     sup.settle()

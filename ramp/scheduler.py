@@ -9,6 +9,13 @@ the task that ate the budget.
 
 With a virtual clock the wait polls I/O once without blocking and jumps the clock to the next
 deadline, so simulated minutes pass in seconds and runs repeat exactly.
+
+Stalls (SPEC 2.2, *Stalls and freezes*): before every unit of work (a task, an I/O callback,
+the wait) the loop compares the clock with the start of the last tick. More than
+`stall_limit` since then means the loop did not run (a stuck task, a blocked call, the process
+stopped by the kernel or a debugger, a clock jump): `on_stall` runs first, before anything
+else can reach a wire, and the HAL asks `on_time()` before motion output, so a write computed
+before the gap is dropped even when the gap fell in the middle of a task.
 """
 
 from __future__ import annotations
@@ -16,6 +23,7 @@ from __future__ import annotations
 import logging
 import math
 import select
+import threading
 import time
 from collections import deque
 from collections.abc import Callable
@@ -27,6 +35,10 @@ log = logging.getLogger("ramp.scheduler")
 
 TaskFn = Callable[[float, float], None]
 IoCallback = Callable[[], None]
+#: Called with (gap in s, the unit of work during which the time went) when the loop stalled.
+StallHandler = Callable[[float, str], None]
+#: The unit of work a gap is blamed on when it fell between ticks.
+WAIT = "the wait between ticks"
 
 
 @dataclass
@@ -81,12 +93,22 @@ class Scheduler:
     """Runs tasks at integer divisors of a base rate, and I/O callbacks between ticks."""
 
     def __init__(self, clock: Clock, rate_hz: float = 100.0,
-                 overrun_log_interval: float = 5.0) -> None:
+                 overrun_log_interval: float = 5.0, stall_limit: float = 0.25) -> None:
         if not (math.isfinite(rate_hz) and 0 < rate_hz <= 2000):
             raise ValueError(f"scheduler rate {rate_hz} Hz is outside 0-2000")
         self.clock = clock
         self.rate_hz = float(rate_hz)
         self.period = 1.0 / self.rate_hz
+        #: A loop waiting out a long period is not stalled: never less than two periods.
+        self.stall_limit = max(stall_limit, 2 * self.period)
+        #: Set by the owner (the supervisor): stops every module. None: stalls are not checked.
+        self.on_stall: StallHandler | None = None
+        self.stalls = 0
+        self._beat: float | None = None  # clock time the last tick started
+        self._unit = WAIT  # the unit of work in progress (or last begun)
+        self._stall_requested = False  # set from the stall guard's thread ...
+        self._stall_lock = threading.Lock()  # ... under this lock, against handling it twice
+        self._handled_alive = -1.0  # `alive_at` of the last stall handled
         self.tasks: list[ScheduledTask] = []
         self.stats = TickStats()
         self._readers: dict[int, IoCallback] = {}
@@ -139,6 +161,49 @@ class Scheduler:
     def stopping(self) -> bool:
         """True once `stop()` was called (from a signal handler, say)."""
         return self._stop
+
+    # -- stalls -------------------------------------------------------------------------------
+    def request_stall_stop(self, alive_mark: float) -> None:
+        """From another thread (the stall guard, which sent zeros when the loop had shown no
+        progress since `alive_mark`): treat that gap as a stall even if it is shorter than
+        this loop's own limit, unless the loop has already handled it."""
+        with self._stall_lock:
+            if alive_mark != self._handled_alive:
+                self._stall_requested = True
+
+    def on_time(self) -> bool:
+        """False while a stall has happened and not yet been handled: motion output computed
+        now was computed before the gap and must be dropped (the HAL asks before writing)."""
+        if self.on_stall is None or self._beat is None:
+            return True
+        return not self._stall_requested and self.clock.now() - self._beat <= self.stall_limit
+
+    def check_stall(self) -> bool:
+        """Handle a stall now if there was one (`on_stall` first, before any other output);
+        True when it did."""
+        if self.on_stall is None or self._beat is None:
+            return False
+        now = self.clock.now()
+        gap = now - self._beat
+        if gap <= self.stall_limit and not self._stall_requested:
+            return False
+        with self._stall_lock:
+            self._beat = now  # the handler's own output (zeros) is on time
+            self._stall_requested = False
+            self._handled_alive = self.alive_at
+        self.stalls += 1
+        try:
+            self.on_stall(gap, self._unit)
+        except Exception:
+            log.exception("stall handler raised")
+        return True
+
+    def _begin(self, unit: str) -> None:
+        """Before each unit of work: a gap is blamed on the unit that was running."""
+        self.check_stall()
+        self._unit = unit
+        self.current_task = unit
+        self.alive_at = time.perf_counter()
 
     def run(self, until: Callable[[], bool] | None = None) -> None:
         """Tick until `stop()` has been called or `until()` is true.
@@ -207,15 +272,17 @@ class Scheduler:
                     self.poll_io(0.0, deadline)
                 return
             polled = True
+            self._begin(WAIT)
             if not self._readers and not self._writers:
                 # Nothing to watch: sleep the remainder with a µs-precise wait.
-                self.alive_at = time.perf_counter()
                 select.select([], [], [], remaining)
                 continue
             self.poll_io(remaining, deadline)
 
     def _tick(self, deadline: float) -> None:
+        self.check_stall()  # a gap in the wait is handled before the first task
         now = self.clock.now()
+        self._beat = now
         late = max(0.0, now - deadline)
         self.stats.record(late)
         missed = int(late // self.period)
@@ -228,9 +295,8 @@ class Scheduler:
             task.next_index = (self._index // task.divisor + 1) * task.divisor
             tdt = task.divisor * self.period if task.last_run is None else now - task.last_run
             task.last_run = now
-            self.current_task = task.name
+            self._begin(task.name)
             t0 = self.clock.now()
-            self.alive_at = time.perf_counter()
             try:
                 task.fn(now, tdt)
             except Exception:
@@ -278,8 +344,7 @@ class Scheduler:
             self._overruns_unlogged = 0
 
     def _guard(self, cb: IoCallback, what: str) -> None:
-        self.current_task = what
-        self.alive_at = time.perf_counter()
+        self._begin(what)
         try:
             cb()
         except Exception:

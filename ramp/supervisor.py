@@ -24,6 +24,7 @@ from ramp.mcp.messages import Response
 from ramp.mcp.protocol import TooLong, parse_message, too_long_response
 from ramp.scheduler import Scheduler
 from ramp.server import Connection, McpServer
+from ramp.stall_guard import StallGuard
 
 log = logging.getLogger("ramp.supervisor")
 
@@ -50,9 +51,12 @@ class Supervisor:
                  port: int | None = None) -> None:
         self.config = config
         self.clock = clock or MonotonicClock()
-        self.scheduler = Scheduler(self.clock, config.rate_hz)
+        self.scheduler = Scheduler(self.clock, config.rate_hz, stall_limit=config.stall_limit)
+        self.scheduler.on_stall = self._on_stall
         factory = bus_factory or default_bus_factory
         self.buses: dict[str, Bus] = {name: factory(bc) for name, bc in config.buses.items()}
+        for bus in self.buses.values():
+            bus.gate = self.scheduler.on_time  # motion computed before a stall never goes out
         self.bus_health = {name: BusHealth() for name in self.buses}
         slots: dict[str, ModuleSlot] = {}
         for name, mc in config.modules.items():
@@ -76,9 +80,9 @@ class Supervisor:
             max_output=config.server.max_output)
         # max_line already bounds a message's work; every well-formed one fits (>= 8 bytes each)
         self._max_requests = max(256, config.server.max_line // 8 + 1)
+        self.stall_guard = StallGuard(self, config.stall_limit)
         self.started_at = 0.0
         self.running = False
-        self._stop_pending = False  # set from the stall guard's thread
 
     # -- lifecycle ----------------------------------------------------------------------------
     def start(self) -> None:
@@ -92,7 +96,6 @@ class Supervisor:
         sched.add_task("buses", sched.rate_hz, self._tick_buses)
         sched.add_task("watchdog", sched.rate_hz, self.robot.tick)
         sched.add_task("hotplug", self._divisor_rate(1.0), self._retry_buses)
-        sched.add_task("safety", sched.rate_hz, self._safety_tick)
         for slot in self.slots.values():
             for task in slot.module.tasks():
                 rate = self._divisor_rate(task.rate_hz)
@@ -124,21 +127,29 @@ class Supervisor:
             bus.close()  # zeros on the wire first, then the port closes
         self.server.close()
 
-    def stop_all_motors(self) -> None:
-        """Last resort (the stall guard's thread): zeros straight to every driver. The loop
-        then stops every module on its next tick, so the layers above agree with the wire."""
-        self._stop_pending = True
+    def stop_all_motors(self, alive_mark: float) -> None:
+        """Last resort (the stall guard's thread, the loop silent since `alive_mark`): zeros
+        straight to every driver. The loop, when it runs again, treats this as a stall, so
+        the layers above agree with the wire."""
+        self.scheduler.request_stall_stop(alive_mark)
+        self._zeros_everywhere()
+
+    def _zeros_everywhere(self) -> None:
         for name, bus in self.buses.items():
+            if not bus.is_open:
+                continue
             try:
                 bus.stop_motors()
-            except Exception as exc:  # noqa: BLE001
+            except Exception as exc:  # noqa: BLE001 - every other bus must still stop
                 log.error("bus %s: could not stop motors: %s", name, exc)
 
-    def _safety_tick(self, now: float, dt: float) -> None:
-        """After a stall, the modules learn that their motors were stopped under them."""
-        if self._stop_pending:
-            self._stop_pending = False
-            self.robot.stop_all("tick loop stalled")
+    def _on_stall(self, gap: float, unit: str) -> None:
+        """The loop lost more than `stall_limit` (SPEC 2.2). Before anything else goes out:
+        zeros on every wire, which also turns every queued command and every refresh value
+        into a zero; then every module stops and the watchdog trips."""
+        self._zeros_everywhere()
+        self.robot.stalled("tick loop stalled")
+        self.stall_guard.loop_stalled(gap, unit)
 
     def _divisor_rate(self, wanted_hz: float) -> float:
         """The rate nearest `wanted_hz` that divides the base rate (at most the base rate)."""

@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
 from ramp.errors import ConfigError
@@ -43,6 +43,8 @@ class MotorChannel(ABC):
             raise ValueError(f"{self.label}: duty must be a finite number, got {duty!r}")
         if not -1.0 <= duty <= 1.0:
             raise ValueError(f"{self.label}: duty {duty} is outside -1..1")
+        if self.bus is not None and not self.bus.gate():
+            return  # computed before a stall: the loop's stall handler stops this motor
         self._duty = float(duty)
         self._apply(self._duty)
 
@@ -110,6 +112,10 @@ class BridgeInput(ABC):
         """The newest ratio, in mV/V."""
 
 
+def _always() -> bool:
+    return True
+
+
 class Bus(ABC):
     """One physical link to controllers or I/O boards, built from a YAML `buses:` entry.
 
@@ -130,6 +136,9 @@ class Bus(ABC):
         self.params = dict(params)
         self.is_open = False
         self.motors: list[MotorChannel] = []
+        #: Asked before motion output; False means the loop has stalled and not yet stopped
+        #: everything, so what is about to go out is stale. The supervisor sets it.
+        self.gate: Callable[[], bool] = _always
 
     def check_params(self, params: Mapping[str, Any]) -> dict[str, Any]:
         """This driver's keys of `params`, checked against `fields`, defaults filled in.
@@ -174,7 +183,7 @@ class Bus(ABC):
         self.is_open = True
 
     def tick(self, now: float, dt: float) -> None:
-        if self.is_open:
+        if self.is_open and self.gate():  # no refresh of a pre-stall value
             self._tick(now, dt)
 
     def stop_motors(self) -> None:

@@ -243,6 +243,12 @@ class RobotDistribution:
                         peer, now - self.watchdog.last_feed)
             self._stop_keep_trip("watchdog expired")
 
+    def stalled(self, reason: str) -> None:
+        """The loop lost time (SPEC 2.2, stalls and freezes): every attached module stops and
+        the watchdog reads `tripped` until the next accepted motion request."""
+        self._stop_keep_trip(reason)
+        self.watchdog.trip()
+
     def client_lost(self, client: Client) -> None:
         if self.control.owner is client:
             log.info("control released: owner %s (%s) disconnected",

@@ -49,6 +49,11 @@ class Watchdog:
             return True
         return False
 
+    def trip(self) -> None:
+        """Motion was stopped under the robot (a stalled loop): `tripped` until the next
+        accepted motion request, whatever the state was."""
+        self._trip()
+
     def client_lost(self, client: object) -> bool:
         """True when the lost client was feeding an armed watchdog (the caller stops)."""
         if self.state == "armed" and client is self.feeder:
