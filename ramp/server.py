@@ -1,10 +1,12 @@
 """Server layer: non-blocking MCP over TCP, serviced by the scheduler between ticks.
 
 One response line per request line, in order, per client. A client that stops reading is
-cut off once its unsent output passes a bound, so it can never block the loop or grow memory;
-a client that floods gets at most one small read's worth of work per wake-up, so the tick and
-the other clients keep their turn. A client that half-closes (sends FIN) is treated as gone for
-the watchdog and arbitration at once, but still receives every answer it is owed.
+cut off once its unsent output passes a bound, so it can never block the loop or grow memory.
+Work is bounded by time (SPEC 2.2, *Bounded work*): a client's turn reads at most one small
+chunk, then answers its queued messages request by request until the tick's deadline (or a
+short slice, so other clients interleave); whatever is left, even half a message, is taken up
+again in its next turn, after the tick. A client that half-closes (sends FIN) is treated as
+gone for the watchdog and arbitration at once, but still receives every answer it is owed.
 """
 
 from __future__ import annotations
@@ -13,20 +15,22 @@ import errno
 import functools
 import logging
 import socket
-from collections.abc import Callable
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
 
 from ramp.layers.robot import Client
 from ramp.mcp.messages import Response, error_response
-from ramp.mcp.protocol import LineSplitter, TooLong, format_responses
+from ramp.mcp.protocol import LineSplitter, TooLong, format_response
 from ramp.scheduler import Scheduler
 
 log = logging.getLogger("ramp.server")
 
-# Work per wake-up is proportional to bytes read (about 5 us per byte for a flood of bare
-# newlines or gets, measured): 64 KiB once held the loop for 300 ms, long enough for the stall
-# guard to stop every motor. 1 KiB bounds one client's turn to a few ms; the rest waits in the
-# kernel, and select reports the socket readable again on the next pass.
+# One read per turn: 64 KiB once held the loop for 300 ms (about 5 us per byte of bare newlines
+# or gets), long enough for the stall guard to stop every motor. The rest waits in the kernel,
+# and select reports the socket readable again on the next pass.
 READ_CHUNK = 1024
+#: Longest a client's turn lasts even when the tick is far off, so other clients interleave.
+TURN_S = 0.002
 
 
 class Connection(Client):
@@ -37,6 +41,12 @@ class Connection(Client):
         self.sock = sock
         self.fd = sock.fileno()
         self.splitter = LineSplitter(max_line)
+        #: Complete messages read and not yet answered, oldest first.
+        self.queue: deque[bytes | TooLong] = deque()
+        #: The message being answered: its remaining steps and its answer so far (formatted
+        #: step by step, so no single step formats thousands of responses).
+        self.steps: Iterator[list[Response]] | None = None
+        self.answer: list[bytes] = []
         self.out = bytearray()
         self.closed = False
         #: The client sent FIN: nothing more to read, answers still to deliver.
@@ -44,7 +54,9 @@ class Connection(Client):
         self.lost_reported = False
 
 
-Handler = Callable[[Connection, "bytes | TooLong"], list[Response]]
+#: One message -> its answer, one step per request (responses, possibly none, per step), so
+#: the server can stop between requests when the tick is due.
+Handler = Callable[[Connection, "bytes | TooLong"], Iterable[list[Response]]]
 
 
 class McpServer:
@@ -126,35 +138,63 @@ class McpServer:
 
     # -- reading and answering ----------------------------------------------------------------
     def _readable(self, conn: Connection) -> None:
-        try:
-            data = conn.sock.recv(READ_CHUNK)
-        except (BlockingIOError, InterruptedError):
-            return
-        except OSError as exc:
-            self._drop(conn, f"read error: {exc.strerror or exc}")
-            return
-        if not data:
-            self._end_input(conn)
-            return
-        for msg in conn.splitter.feed(data):
-            answer = self._answer(conn, msg)
-            if conn.closed:
+        """A client's turn: read one chunk unless work is left over, then answer in time."""
+        end = min(self.scheduler.io_deadline, self.scheduler.clock.now() + TURN_S)
+        if conn.steps is None and not conn.queue:
+            try:
+                data = conn.sock.recv(READ_CHUNK)
+            except (BlockingIOError, InterruptedError):
                 return
-            conn.out += answer
+            except OSError as exc:
+                self._drop(conn, f"read error: {exc.strerror or exc}")
+                return
+            if not data:
+                self._end_input(conn)
+                return
+            conn.queue.extend(conn.splitter.feed(data))
+        self._work(conn, end)
+        if conn.closed:
+            return
+        self.scheduler.set_pending(conn.fd, conn.steps is not None or bool(conn.queue))
         self._flush(conn)
 
-    def _answer(self, conn: Connection, msg: bytes | TooLong) -> bytes:
-        """The one response line `msg` is owed, whatever goes wrong while making it.
+    def _work(self, conn: Connection, end: float) -> None:
+        """Answer queued messages request by request until `end` (at least one step)."""
+        clock = self.scheduler.clock
+        while conn.steps is not None or conn.queue:
+            if conn.steps is None:
+                msg = conn.queue.popleft()
+                conn.answer = []
+                try:
+                    conn.steps = iter(self.handler(conn, msg))
+                except Exception as exc:
+                    self._finish(conn, self._fault(conn, exc))
+                    continue
+            try:
+                part = next(conn.steps, None)
+                if part is None:
+                    self._finish(conn)
+                elif part:
+                    conn.answer.append("".join([format_response(r) for r in part])
+                                       .encode("ascii"))
+            except Exception as exc:
+                # Whatever went wrong (a get property reading NaN, which MCP cannot carry),
+                # the message is owed one line: otherwise the client's lines slip out of step.
+                self._finish(conn, self._fault(conn, exc))
+            if conn.closed or clock.now() >= end:
+                return
 
-        An exception here (a get property reading NaN, which MCP cannot carry) would otherwise
-        skip this message and the rest of the read, leaving the client's lines out of step.
-        """
-        try:
-            return format_responses(self.handler(conn, msg))
-        except Exception as exc:
-            log.exception("could not answer a message from %s", conn.peer)
-            return format_responses([error_response(
-                "robot", "mcp", "fault", f"internal error {type(exc).__name__}")])
+    def _finish(self, conn: Connection, instead: bytes | None = None) -> None:
+        """The message's one response line: its answer, or `instead` (a fault) alone."""
+        parts = conn.answer if instead is None else [instead]
+        conn.steps, conn.answer = None, []
+        if not conn.closed:
+            conn.out += b"".join(parts) + b"\n"
+
+    def _fault(self, conn: Connection, exc: Exception) -> bytes:
+        log.error("could not answer a message from %s", conn.peer, exc_info=exc)
+        return format_response(error_response(
+            "robot", "mcp", "fault", f"internal error {type(exc).__name__}")).encode("ascii")
 
     def _end_input(self, conn: Connection) -> None:
         """FIN from the client: it can command nothing more, but its answers are still owed.

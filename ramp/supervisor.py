@@ -8,7 +8,7 @@ a closed bus is retried about once a second and its modules re-attach when it is
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 from ramp.clock import Clock, MonotonicClock
@@ -157,13 +157,16 @@ class Supervisor:
         return self.scheduler.rate_hz / divisor
 
     # -- requests -----------------------------------------------------------------------------
-    def _handle(self, conn: Connection, msg: bytes | TooLong) -> list[Response]:
+    def _handle(self, conn: Connection, msg: bytes | TooLong) -> Iterator[list[Response]]:
+        """One message's answer, one request per step (the server stops between steps when
+        the tick is due). Nothing runs before the first step."""
         now = self.clock.now()
         if isinstance(msg, TooLong):
             self.robot.feed(conn, now)
-            return [too_long_response(self.config.server.max_line)]
+            yield [too_long_response(self.config.server.max_line)]
+            return
         parsed = parse_message(msg, max_requests=self._max_requests)
-        return self.robot.handle(conn, parsed.requests, now, parsed.syntax_error)
+        yield from self.robot.handle_steps(conn, parsed.requests, now, parsed.syntax_error)
 
     def _health(self) -> Health:
         s = self.scheduler.stats

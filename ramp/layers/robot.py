@@ -8,7 +8,7 @@ SPEC's order: module known, module state, device and function, parameters, owner
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -118,17 +118,21 @@ class RobotDistribution:
     # -- messages -----------------------------------------------------------------------------
     def handle(self, client: Client, requests: tuple[Request, ...], now: float,
                tail: Response | None = None) -> list[Response]:
-        """Every request of one message, in order; `tail` (a syntax error) ends the answer.
+        """Every request of one message, in order; `tail` (a syntax error) ends the answer."""
+        return [r for part in self.handle_steps(client, requests, now, tail) for r in part]
 
-        Every complete message feeds the watchdog if its sender is the feeder.
+    def handle_steps(self, client: Client, requests: tuple[Request, ...], now: float,
+                     tail: Response | None = None) -> Iterator[list[Response]]:
+        """The same, one request per step, so the server can pause between requests.
+
+        Every complete message feeds the watchdog if its sender is the feeder, as soon as it
+        has arrived (before its requests, which may be answered over several turns).
         """
-        out: list[Response] = []
-        for req in requests:
-            out.extend(self._one(client, req, now))
-        if tail is not None:
-            out.append(tail)
         self.watchdog.feed(client, now)
-        return out
+        for req in requests:
+            yield self._one(client, req, now)
+        if tail is not None:
+            yield [tail]
 
     def feed(self, client: Client, now: float) -> None:
         """A complete message that carried no requests we could read (too long) still feeds."""

@@ -74,7 +74,8 @@ def marte() -> Iterator[SimHarness]:
 
 def answer(h: Harness, client: Client, msg: bytes | TooLong) -> bytes:
     """What the server writes for one message: the supervisor's handler, then the codec."""
-    return format_responses(h.sup.server.handler(client, msg))  # type: ignore[arg-type]
+    steps = h.sup.server.handler(client, msg)  # type: ignore[arg-type]
+    return format_responses([r for part in steps for r in part])
 
 
 def ask(h: Harness, client: Client, text: str) -> str:
