@@ -312,6 +312,7 @@ class ScriptedRobot:
         self.base_fault = False
         self.watchdog_timeout = "1.0"
         self.interrupt_when: Callable[[list[tuple[int, str]]], bool] = lambda log: False
+        self._interrupted = False  # Ctrl-C once: a second one would hit a later test
         self._conns: list[socket.socket] = []
         threading.Thread(target=self._accept, daemon=True).start()
 
@@ -341,7 +342,8 @@ class ScriptedRobot:
                     text = line.decode()
                     self.log.append((index, text))
                     conn.sendall(self.answer(text).encode() + b"\n")
-                    if self.interrupt_when(self.log):
+                    if not self._interrupted and self.interrupt_when(self.log):
+                        self._interrupted = True
                         signal.pthread_kill(threading.main_thread().ident or 0, signal.SIGINT)
 
     def answer(self, text: str) -> str:
