@@ -77,14 +77,22 @@ class TickStats:
     _sorted: list[float] = field(default_factory=list)
 
     def record(self, late_s: float) -> None:
-        us = late_s * 1e6
+        """A tick ran `late_s` after its deadline."""
+        self._add(late_s * 1e6)
+        self.ticks += 1
+
+    def record_missed(self, late_s: float) -> None:
+        """A deadline passed `late_s` ago while a task still ran; that tick is skipped, but
+        how late the loop was shows in the figures (a task stuck for 2 s is a 2 s late tick)."""
+        self._add(late_s * 1e6)
+
+    def _add(self, us: float) -> None:
         self.late_us.append(us)
         bisect.insort(self._sorted, us)
         if len(self.late_us) > self.window:
             old = self.late_us.popleft()
             del self._sorted[bisect.bisect_left(self._sorted, old)]
         self.max_late_us = max(self.max_late_us, us)
-        self.ticks += 1
 
     def percentiles(self) -> tuple[float, float, float]:
         """(p50, p99, max) lateness in µs over the recent window; max is since start."""
@@ -352,6 +360,7 @@ class Scheduler:
         # Tasks that ran past the next deadline: the overrun is this tick's, name its task.
         after = self.clock.now()
         if after > self._next:
+            self.stats.record_missed(after - self._next)
             extra = int((after - self._next) // self.period) + 1
             self.stats.overruns += 1
             self.stats.skipped += extra

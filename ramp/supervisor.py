@@ -11,6 +11,7 @@ import logging
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
+from ramp.bus_opener import BusOpener
 from ramp.clock import Clock, MonotonicClock
 from ramp.config import BusConfig, Config
 from ramp.errors import DeviceError
@@ -58,6 +59,7 @@ class Supervisor:
         for bus in self.buses.values():
             bus.gate = self.scheduler.on_time  # motion computed before a stall never goes out
         self.bus_health = {name: BusHealth() for name in self.buses}
+        self.opener = BusOpener(inline=self.clock.virtual)
         slots: dict[str, ModuleSlot] = {}
         for name, mc in config.modules.items():
             devices = {
@@ -89,8 +91,11 @@ class Supervisor:
         """Open every bus (missing ones are retried later), attach modules, start serving."""
         now = self.clock.now()
         self.started_at = now
+        for name, bus in self.buses.items():  # in parallel: each open has its own thread
+            self._try_open(name, bus, now, quiet=True)
         for name, bus in self.buses.items():
-            self._try_open(name, bus, now)
+            if self.opener.busy(name):
+                self._try_open(name, bus, now)
         self._update_slots(now)
         sched = self.scheduler
         sched.add_task("buses", sched.rate_hz, self._tick_buses)
@@ -114,8 +119,8 @@ class Supervisor:
         line waits for them so a client connecting right after sees its modules attached.
         """
         end = self.clock.now() + limit
-        self.scheduler.run(lambda: self.clock.now() >= end or all(
-            b.ready() for b in self.buses.values() if b.is_open))
+        self.scheduler.run(lambda: self.clock.now() >= end or (not self.opener.in_flight and all(
+            b.ready() for b in self.buses.values() if b.is_open)))
 
     def shutdown(self) -> None:
         """Stop every motor (zeros on the wire), close devices and the server. Idempotent."""
@@ -123,6 +128,7 @@ class Supervisor:
             return
         self.running = False
         self.robot.stop_all("shutdown")
+        self.opener.cancel_all()
         for bus in self.buses.values():
             bus.close()  # zeros on the wire first, then the port closes
         self.server.close()
@@ -175,23 +181,31 @@ class Supervisor:
                       clients=len(self.server.clients))
 
     # -- buses and attachment -----------------------------------------------------------------
-    def _try_open(self, name: str, bus: Bus, now: float) -> bool:
-        try:
-            bus.open(now)
-        except DeviceError as exc:
-            health = self.bus_health[name]
-            if health.reason != exc.detail:
-                log.warning("bus %s (%s) unavailable: %s; retrying every %.0f s", name,
-                            bus.driver_name, exc.detail, RETRY_PERIOD)
-            health.reason = exc.detail
-            health.next_retry = now + RETRY_PERIOD
-            bus.close()
+    def _try_open(self, name: str, bus: Bus, now: float, quiet: bool = False) -> bool:
+        """Open a bus without holding the loop (see `ramp.bus_opener`); True once it is open.
+        A failure waits RETRY_PERIOD before the next try; an open still running is looked at
+        again on the next tick. `quiet`: start it and do not wait (the others start too)."""
+        if quiet and not self.opener.inline:
+            self.opener.open(name, bus, now)
             return False
-        self.bus_health[name].reason = ""
+        result = self.opener.open(name, bus, now)
+        if result is False:
+            return False
+        health = self.bus_health[name]
+        if isinstance(result, DeviceError):
+            if health.reason != result.detail:
+                log.warning("bus %s (%s) unavailable: %s; retrying every %.0f s", name,
+                            bus.driver_name, result.detail, RETRY_PERIOD)
+            health.reason = result.detail
+            health.next_retry = now + RETRY_PERIOD
+            return False
+        health.reason = ""
         log.info("bus %s (%s) open", name, bus.driver_name)
         return True
 
     def _tick_buses(self, now: float, dt: float) -> None:
+        if self.opener.in_flight:
+            self._collect_opens(now)
         for name, bus in self.buses.items():
             if not bus.is_open:
                 continue
@@ -201,10 +215,18 @@ class Supervisor:
                 self._bus_fault(name, exc, now)
         self._update_slots(now)
 
+    def _collect_opens(self, now: float) -> None:
+        """Opens that were still running: take their results as soon as they are in."""
+        for name, bus in self.buses.items():
+            was_down = self.bus_health[name].reason != BusHealth.reason
+            if self.opener.busy(name) and self._try_open(name, bus, now) and was_down:
+                log.info("bus %s is back", name)
+
     def _retry_buses(self, now: float, dt: float) -> None:
         reopened = False
         for name, bus in self.buses.items():
-            if (not bus.is_open and now >= self.bus_health[name].next_retry
+            if (not bus.is_open and not self.opener.busy(name)
+                    and now >= self.bus_health[name].next_retry
                     and self._try_open(name, bus, now)):
                 log.info("bus %s is back", name)
                 reopened = True

@@ -198,3 +198,22 @@ def test_sigstop_sigcont_sends_nothing_but_zeros_after_the_freeze(
     assert len(stalls) == 1, log
     gap_ms = int(re.search(r"stalled for (\d+) ms", stalls[0]).group(1))  # type: ignore[union-attr]
     assert gap_ms >= freeze_s * 1000 - 50, stalls[0]
+
+
+def test_a_task_stuck_for_300_ms_shows_in_tick_late(h: SimHarness) -> None:
+    """The ticks it swallowed are skipped, but how late the loop was is not hidden: the max
+    of `tick.late` used to stay at the lateness of the tick that came after."""
+    state = {"armed": False}
+
+    def stuck(now: float, dt: float) -> None:
+        if state["armed"]:
+            state["armed"] = False
+            h.clock.advance(0.3)
+
+    h.sup.scheduler.add_task("stuck", 100, stuck)
+    c = h.connect()
+    h.advance(0.1)
+    state["armed"] = True
+    h.advance(0.5)
+    _, _, worst = (int(x) for x in health(c.ask("robot:robot.get=()"))["tick.late"].split(","))
+    assert worst >= 290_000
