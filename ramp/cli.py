@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from types import FrameType
 
 from ramp import __version__
-from ramp.config import Config, check_config
+from ramp.config import Config, check_config, valid_host
 from ramp.errors import ConfigError
 
 log = logging.getLogger("ramp")
@@ -46,13 +46,18 @@ def _print_errors(errors: list[ConfigError]) -> None:
         print(err, file=sys.stderr)
 
 
+#: Exit status for a configuration error, from `ramp check` and `ramp run` alike (the systemd
+#: unit does not restart on it: restarting cannot fix a file).
+EXIT_CONFIG = 2
+
+
 def cmd_check(args: argparse.Namespace) -> int:
     config, errors = check_config(args.file)
     if errors:
         _print_errors(errors)
         print(f"{args.file}: {len(errors)} error{'s' if len(errors) != 1 else ''}",
               file=sys.stderr)
-        return 1
+        return EXIT_CONFIG
     assert config is not None
     print(f"{args.file}: ok ({len(config.buses)} buses, {len(config.modules)} modules: "
           f"{', '.join(config.modules) or 'none'})")
@@ -64,7 +69,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     config, errors = check_config(args.config)
     if errors:
         _print_errors(errors)
-        return 2
+        return EXIT_CONFIG
     assert config is not None
     return run_supervisor(config, sim=args.sim, host=args.host, port=args.port)
 
@@ -126,6 +131,24 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
     return 0
 
 
+def port_number(text: str) -> int:
+    """`--port`: 0-65535 (0 picks a free port); anything else is a usage error (exit 2)."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a TCP port (0-65535)") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{port} is not a TCP port (0-65535)")
+    return port
+
+
+def host_name(text: str) -> str:
+    """`--host`: an IP address or a host name, checked as `server.host` is."""
+    if not valid_host(text):
+        raise argparse.ArgumentTypeError(f"{text!r} is not an IP address or host name")
+    return text
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="ramp", description=__doc__)
     parser.add_argument("--version", action="version", version=f"ramp {__version__}")
@@ -134,8 +157,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--config", default="ramp.yaml", help="config file (default ./ramp.yaml)")
     run.add_argument("--sim", action="store_true",
                      help="replace every bus (except those with sim: false) by its emulator")
-    run.add_argument("--host", default=None, help="address to serve on (default: from config)")
-    run.add_argument("--port", type=int, default=None, help="TCP port (0 picks a free one)")
+    run.add_argument("--host", type=host_name, default=None,
+                     help="address to serve on (default: from config)")
+    run.add_argument("--port", type=port_number, default=None,
+                     help="TCP port, 0-65535 (0 picks a free one)")
     run.add_argument("--log-level", default="info",
                      choices=["debug", "info", "warning", "error"])
     run.set_defaults(func=cmd_run)

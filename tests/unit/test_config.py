@@ -87,10 +87,10 @@ def test_ramp_check_command(tmp_path: Path, capsys: object) -> None:
     assert main(["check", str(good)]) == 0
     bad = tmp_path / "bad.yaml"
     bad.write_text("watchdog: {timeout: -1}\nscheduler: {rate_hz: fast}\n")
-    assert main(["check", str(bad)]) == 1
+    assert main(["check", str(bad)]) == 2  # a configuration error, as from ramp run
     cfg, errors = check_config(bad)
     assert len(errors) == 2
-    assert main(["check", str(tmp_path / "missing.yaml")]) == 1
+    assert main(["check", str(tmp_path / "missing.yaml")]) == 2
 
 
 def test_checks_spanning_several_keys_are_reported_with_their_line() -> None:
