@@ -71,6 +71,13 @@ def cmd_run(args: argparse.Namespace) -> int:
         _print_errors(errors)
         return EXIT_CONFIG
     assert config is not None
+    from ramp.server import ensure_fd_limit
+
+    problem = ensure_fd_limit(config.server.max_clients, len(config.buses))
+    if problem is not None:
+        _print_errors([ConfigError(problem, file=config.file, key="server.max_clients",
+                                   line=config.lines.get("server.max_clients", 0))])
+        return EXIT_CONFIG
     return run_supervisor(config, sim=args.sim, host=args.host, port=args.port)
 
 

@@ -141,7 +141,7 @@ _Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _constru
 SERVER_FIELDS = {
     "host": Field(str, "0.0.0.0", what="a host name or address"),
     "port": Field(int, 5577, lo=0, hi=65535, what="a TCP port"),
-    "max_clients": Field(int, 8, lo=1, hi=1000),
+    "max_clients": Field(int, 8, lo=1, hi=4096, what="a number of clients"),
     "max_line": Field(int, 4096, lo=64, hi=1 << 20, what="a message length in bytes"),
     "max_output": Field(int, 1 << 20, lo=4096, hi=1 << 28,
                         what="bytes of unsent responses before a client is cut off"),

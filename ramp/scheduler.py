@@ -1,11 +1,15 @@
 """The one loop: a fixed-rate tick scheduler that services sockets and ports between ticks.
 
 Why this shape (see shared/reference/platform-limits.md): an absolute-deadline loop waiting in
-`select.select` (microsecond timeout) matches C `clock_nanosleep`, while epoll and asyncio
-round their timeouts up to whole milliseconds (about 0.6 ms late every tick). Input is
-dispatched the moment it arrives during the wait, so a request is answered on arrival, not at
-the next tick. Missed ticks are skipped, never replayed in a burst, and every overrun names
-the task that ate the budget.
+`select.select` (microsecond timeout) matches C `clock_nanosleep`, while epoll, poll and
+asyncio round their timeouts up to whole milliseconds (about 0.6 ms late every tick). But
+select cannot watch a descriptor numbered 1024 or more, and a server with many clients has
+some. So the wait is `poll` (no such limit) for the whole milliseconds, rounded down, then a
+microsecond `select` for the rest on the descriptors below 1024 (all of them, unless there are
+hundreds of clients; the others are looked at again right after). Input is dispatched the
+moment it arrives during the wait, so a request is answered on arrival, not at the next tick.
+Missed ticks are skipped, never replayed in a burst, and every overrun names the task that ate
+the budget.
 
 With a virtual clock the wait polls I/O once without blocking and jumps the clock to the next
 deadline, so simulated minutes pass in seconds and runs repeat exactly.
@@ -21,6 +25,7 @@ before the gap is dropped even when the gap fell in the middle of a task.
 from __future__ import annotations
 
 import bisect
+import contextlib
 import logging
 import math
 import select
@@ -33,6 +38,12 @@ from dataclasses import dataclass, field
 from ramp.clock import Clock, VirtualClock
 
 log = logging.getLogger("ramp.scheduler")
+
+#: select() cannot watch a descriptor from this number up (FD_SETSIZE).
+SELECT_FD_LIMIT = 1024
+_IN = select.POLLIN | select.POLLPRI
+_OUT = select.POLLOUT
+_GONE = select.POLLHUP | select.POLLERR  # the callback reads or writes, and learns why
 
 TaskFn = Callable[[float, float], None]
 IoCallback = Callable[[], None]
@@ -129,6 +140,7 @@ class Scheduler:
         self.tasks: list[ScheduledTask] = []
         self.stats = TickStats()
         self._readers: dict[int, IoCallback] = {}
+        self._poller = select.poll()
         #: Readers with input already read and not yet handled: served without waiting.
         self._pending: set[int] = set()
         #: Until when the I/O callback now running may work (the next tick's deadline).
@@ -163,10 +175,12 @@ class Scheduler:
 
     def add_reader(self, fd: int, callback: IoCallback) -> None:
         self._readers[fd] = callback
+        self._watch(fd)
 
     def remove_reader(self, fd: int) -> None:
         self._readers.pop(fd, None)
         self._pending.discard(fd)
+        self._watch(fd)
 
     def set_pending(self, fd: int, pending: bool) -> None:
         """A reader with work left over from its last turn (input already read) gets another
@@ -178,9 +192,20 @@ class Scheduler:
 
     def add_writer(self, fd: int, callback: IoCallback) -> None:
         self._writers[fd] = callback
+        self._watch(fd)
 
     def remove_writer(self, fd: int) -> None:
         self._writers.pop(fd, None)
+        self._watch(fd)
+
+    def _watch(self, fd: int) -> None:
+        """Tell the poller what `fd` is watched for now."""
+        mask = (_IN if fd in self._readers else 0) | (_OUT if fd in self._writers else 0)
+        if mask:
+            self._poller.register(fd, mask)  # registers or modifies
+        else:
+            with contextlib.suppress(KeyError):  # it was not watched
+                self._poller.unregister(fd)
 
     # -- running ------------------------------------------------------------------------------
     def stop(self) -> None:
@@ -269,13 +294,7 @@ class Scheduler:
             return 0
         if self._pending:
             timeout = 0.0
-        try:
-            r, w, _ = select.select(list(self._readers), list(self._writers), [], timeout)
-        except InterruptedError:  # pragma: no cover - PEP 475 retries; kept for safety
-            return 0
-        except (OSError, ValueError):
-            self._drop_bad_fds()
-            return 0
+        r, w = self._ready(timeout)
         if self._pending:
             r = list(set(r) | self._pending)
         ready = [(fd, True) for fd in w] + [(fd, False) for fd in r]  # output first: it frees
@@ -296,6 +315,29 @@ class Scheduler:
             self.io_deadline = math.inf
         self.alive_at = time.perf_counter()
         return ran
+
+    def _ready(self, timeout: float) -> tuple[list[int], list[int]]:
+        """(readable, writable) descriptors, waiting at most `timeout` (see the docstring at
+        the top: whole milliseconds in poll, the rest in a microsecond select)."""
+        ms = int(timeout * 1000)  # rounded down: poll rounds up
+        events = self._poller.poll(ms)
+        if not events and ms == 0 and timeout > 0:
+            low_r = [fd for fd in self._readers if fd < SELECT_FD_LIMIT]
+            low_w = [fd for fd in self._writers if fd < SELECT_FD_LIMIT]
+            with contextlib.suppress(OSError, ValueError):  # closed under us: poll says so
+                select.select(low_r, low_w, [], timeout)
+            events = self._poller.poll(0)
+        r: list[int] = []
+        w: list[int] = []
+        for fd, ev in events:
+            if ev & select.POLLNVAL:
+                self._drop_bad_fd(fd)
+                continue
+            if ev & (_IN | _GONE) and fd in self._readers:
+                r.append(fd)
+            if ev & (_OUT | _GONE) and fd in self._writers:
+                w.append(fd)
+        return r, w
 
     def _wait(self, deadline: float) -> None:
         if isinstance(self.clock, VirtualClock):
@@ -392,13 +434,10 @@ class Scheduler:
         finally:
             self.current_task = ""
 
-    def _drop_bad_fds(self) -> None:
-        """A closed fd left registered would make select fail forever: find and drop it."""
-        for table in (self._readers, self._writers):
-            for fd in list(table):
-                try:
-                    select.select([fd], [], [], 0)
-                except (OSError, ValueError):
-                    log.error("dropping closed file descriptor %d from the loop", fd)
-                    table.pop(fd, None)
-                    self._pending.discard(fd)
+    def _drop_bad_fd(self, fd: int) -> None:
+        """A closed fd left registered would be reported forever: drop it."""
+        log.error("dropping closed file descriptor %d from the loop", fd)
+        self._readers.pop(fd, None)
+        self._writers.pop(fd, None)
+        self._pending.discard(fd)
+        self._watch(fd)

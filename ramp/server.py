@@ -31,6 +31,15 @@ log = logging.getLogger("ramp.server")
 READ_CHUNK = 1024
 #: Longest a client's turn lasts even when the tick is far off, so other clients interleave.
 TURN_S = 0.002
+#: Out of file descriptors (EMFILE): stop accepting for this long instead of spinning (the
+#: listening socket stays readable, and accept failed 130,924 times in 10 s); the client
+#: waits in the listen backlog meanwhile.
+ACCEPT_BACKOFF_S = 0.1
+_OUT_OF_FDS = (errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM)
+#: Descriptors the process needs besides its clients: stdio, the listening socket, logs, and
+#: each bus's port (a pty or USB adapter, a CAN socket, a vendor library's own).
+FD_RESERVE = 32
+FD_PER_BUS = 4
 
 
 class Connection(Client):
@@ -78,6 +87,9 @@ class McpServer:
         self.sock: socket.socket | None = None
         self.accepted = 0
         self.refused = 0
+        self.accept_failures = 0
+        self._accept_paused_until: float | None = None
+        self._accept_failures_logged = 0
 
     @property
     def address(self) -> tuple[str, int]:
@@ -90,10 +102,20 @@ class McpServer:
         sock = socket.socket(family, socket.SOCK_STREAM)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         sock.bind((self.host, self.port))
-        sock.listen(64)
+        # Room for every client to connect at once (a burst past the backlog waits 1 s for
+        # TCP to retry its SYN).
+        sock.listen(max(64, min(self.max_clients + 16, socket.SOMAXCONN)))
         sock.setblocking(False)
         self.sock = sock
         self.scheduler.add_reader(sock.fileno(), self._accept)
+        self.scheduler.add_task("server", self.scheduler.rate_hz, self._tick)
+
+    def _tick(self, now: float, dt: float) -> None:
+        """Accept again once a back-off after running out of descriptors is over."""
+        if self._accept_paused_until is not None and now >= self._accept_paused_until:
+            self._accept_paused_until = None
+            if self.sock is not None:
+                self.scheduler.add_reader(self.sock.fileno(), self._accept)
 
     def close(self) -> None:
         for conn in list(self.clients.values()):
@@ -112,7 +134,7 @@ class McpServer:
             except (BlockingIOError, InterruptedError):
                 return
             except OSError as exc:
-                log.error("accept failed: %s", exc)
+                self._accept_failed(exc)
                 return
             peer = f"{addr[0]}:{addr[1]}"
             if len(self.clients) >= self.max_clients:
@@ -135,6 +157,22 @@ class McpServer:
             self.scheduler.add_reader(conn.fd, functools.partial(self._readable, conn))
             log.info("client %s connected (%d of %d)", peer, len(self.clients),
                      self.max_clients)
+
+    def _accept_failed(self, exc: OSError) -> None:
+        self.accept_failures += 1
+        if exc.errno not in _OUT_OF_FDS:
+            log.error("accept failed: %s", exc)
+            return
+        assert self.sock is not None
+        self.scheduler.remove_reader(self.sock.fileno())
+        self._accept_paused_until = self.scheduler.clock.now() + ACCEPT_BACKOFF_S
+        if self.accept_failures - self._accept_failures_logged >= 100 or \
+                self._accept_failures_logged == 0:
+            log.error("accept failed: %s (%d clients connected); new clients wait in the "
+                      "backlog, accepting again in %.0f ms (%d failures so far)",
+                      exc.strerror or exc, len(self.clients), ACCEPT_BACKOFF_S * 1e3,
+                      self.accept_failures)
+            self._accept_failures_logged = self.accept_failures
 
     # -- reading and answering ----------------------------------------------------------------
     def _readable(self, conn: Connection) -> None:
@@ -252,3 +290,26 @@ class McpServer:
         if not conn.lost_reported:
             conn.lost_reported = True
             self.on_disconnect(conn)
+
+
+def ensure_fd_limit(max_clients: int, buses: int) -> str | None:
+    """Make sure this process may open the descriptors `max_clients` clients need: raise the
+    soft RLIMIT_NOFILE up to the hard one if it must. None when it may; otherwise why not
+    (an error for `server.max_clients`, checked before the supervisor starts)."""
+    import resource
+
+    needed = max_clients + FD_RESERVE + FD_PER_BUS * buses
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft == resource.RLIM_INFINITY or soft >= needed:
+        return None
+    if hard != resource.RLIM_INFINITY and hard < needed:
+        return (f"{max_clients} clients need about {needed} file descriptors, and this process "
+                f"may open at most {hard} (raise LimitNOFILE= in the service or `ulimit -n`, "
+                "or lower max_clients)")
+    try:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (needed, hard))
+    except (ValueError, OSError) as exc:
+        return f"cannot raise the file descriptor limit to {needed}: {exc}"
+    log.info("file descriptor limit raised from %d to %d for %d clients", soft, needed,
+             max_clients)
+    return None
