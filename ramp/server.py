@@ -11,6 +11,7 @@ gone for the watchdog and arbitration at once, but still receives every answer i
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import functools
 import logging
@@ -31,6 +32,10 @@ log = logging.getLogger("ramp.server")
 READ_CHUNK = 1024
 #: Longest a client's turn lasts even when the tick is far off, so other clients interleave.
 TURN_S = 0.002
+#: Always room for a stop (SPEC 2.2): with every slot taken, a newcomer evicts the client
+#: silent longest if it has sent no complete message for this long and is neither the owner
+#: nor the feeder, so an operator can always connect and send robot:robot.stop=().
+EVICT_SILENCE_S = 5.0
 #: Out of file descriptors (EMFILE): stop accepting for this long instead of spinning (the
 #: listening socket stays readable, and accept failed 130,924 times in 10 s); the client
 #: waits in the listen backlog meanwhile.
@@ -45,8 +50,10 @@ FD_PER_BUS = 4
 class Connection(Client):
     """One TCP client: its socket, input splitter and pending output."""
 
-    def __init__(self, sock: socket.socket, peer: str, max_line: int) -> None:
+    def __init__(self, sock: socket.socket, peer: str, max_line: int, now: float) -> None:
         super().__init__(peer)
+        #: When its last complete message arrived (or when it connected).
+        self.last_message_at = now
         self.sock = sock
         self.fd = sock.fileno()
         self.splitter = LineSplitter(max_line)
@@ -74,10 +81,13 @@ class McpServer:
     def __init__(self, scheduler: Scheduler, handler: Handler,
                  on_disconnect: Callable[[Connection], None], host: str = "127.0.0.1",
                  port: int = 5577, max_clients: int = 8, max_line: int = 4096,
-                 max_output: int = 1 << 20) -> None:
+                 max_output: int = 1 << 20,
+                 protected: Callable[[Connection], bool] | None = None) -> None:
         self.scheduler = scheduler
         self.handler = handler
         self.on_disconnect = on_disconnect
+        #: True for a client that must never be evicted (the owner, the feeder).
+        self.protected = protected or (lambda conn: False)
         self.host = host
         self.port = port
         self.max_clients = max_clients
@@ -87,6 +97,7 @@ class McpServer:
         self.sock: socket.socket | None = None
         self.accepted = 0
         self.refused = 0
+        self.evicted = 0
         self.accept_failures = 0
         self._accept_paused_until: float | None = None
         self._accept_failures_logged = 0
@@ -137,26 +148,40 @@ class McpServer:
                 self._accept_failed(exc)
                 return
             peer = f"{addr[0]}:{addr[1]}"
-            if len(self.clients) >= self.max_clients:
+            if len(self.clients) >= self.max_clients and not self._evict_for(peer):
                 self.refused += 1
-                log.warning("refused %s: already %d clients (server.max_clients)",
-                            peer, len(self.clients))
-                try:
-                    sock.setblocking(False)
-                    sock.send(b"robot:mcp.error=(busy,too many clients; at most "
-                              + str(self.max_clients).encode() + b")\n")
-                except OSError:
-                    pass
-                sock.close()
+                log.warning("refused %s: already %d clients (server.max_clients), none silent "
+                            "for %.0f s that is neither owner nor feeder", peer,
+                            len(self.clients), EVICT_SILENCE_S)
+                _say_and_close(sock, b"robot:mcp.error=(busy,too many clients; at most "
+                               + str(self.max_clients).encode() + b")\n")
                 continue
             sock.setblocking(False)
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            conn = Connection(sock, peer, self.max_line)
+            conn = Connection(sock, peer, self.max_line, self.scheduler.clock.now())
             self.clients[conn.fd] = conn
             self.accepted += 1
             self.scheduler.add_reader(conn.fd, functools.partial(self._readable, conn))
             log.info("client %s connected (%d of %d)", peer, len(self.clients),
                      self.max_clients)
+
+    def _evict_for(self, newcomer: str) -> bool:
+        """Make room for a newcomer: close the client silent longest, if it has sent no
+        complete message for EVICT_SILENCE_S and is neither the owner nor the feeder."""
+        now = self.scheduler.clock.now()
+        silent = [c for c in self.clients.values()
+                  if now - c.last_message_at >= EVICT_SILENCE_S and not self.protected(c)]
+        if not silent:
+            return False
+        victim = min(silent, key=lambda c: c.last_message_at)
+        quiet = now - victim.last_message_at
+        log.warning("client %s evicted: no message for %.1f s and %s needed its slot "
+                    "(server.max_clients %d)", victim.peer, quiet, newcomer, self.max_clients)
+        self.evicted += 1
+        self._drop(victim, f"evicted after {quiet:.1f} s of silence",
+                   farewell=b"robot:mcp.error=(busy,closed to make room for another client: "
+                   + f"no message for {quiet:.0f} s".encode() + b")\n")
+        return True
 
     def _accept_failed(self, exc: OSError) -> None:
         self.accept_failures += 1
@@ -189,7 +214,10 @@ class McpServer:
             if not data:
                 self._end_input(conn)
                 return
-            conn.queue.extend(conn.splitter.feed(data))
+            messages = conn.splitter.feed(data)
+            if messages:
+                conn.last_message_at = self.scheduler.clock.now()
+                conn.queue.extend(messages)
         self._work(conn, end)
         if conn.closed:
             return
@@ -270,13 +298,16 @@ class McpServer:
         else:
             self.scheduler.remove_writer(conn.fd)
 
-    def _drop(self, conn: Connection, why: str) -> None:
+    def _drop(self, conn: Connection, why: str, farewell: bytes = b"") -> None:
         if conn.closed:
             return
         conn.closed = True
         self.scheduler.remove_reader(conn.fd)
         self.scheduler.remove_writer(conn.fd)
         self.clients.pop(conn.fd, None)
+        if farewell:
+            with contextlib.suppress(OSError):
+                conn.sock.send(farewell)
         try:
             conn.sock.close()
         except OSError as exc:  # pragma: no cover
@@ -290,6 +321,13 @@ class McpServer:
         if not conn.lost_reported:
             conn.lost_reported = True
             self.on_disconnect(conn)
+
+
+def _say_and_close(sock: socket.socket, line: bytes) -> None:
+    with contextlib.suppress(OSError):
+        sock.setblocking(False)
+        sock.send(line)
+    sock.close()
 
 
 def ensure_fd_limit(max_clients: int, buses: int) -> str | None:

@@ -79,7 +79,7 @@ class Supervisor:
             host=host if host is not None else config.server.host,
             port=port if port is not None else config.server.port,
             max_clients=config.server.max_clients, max_line=config.server.max_line,
-            max_output=config.server.max_output)
+            max_output=config.server.max_output, protected=self.robot.protects)
         # max_line already bounds a message's work; every well-formed one fits (>= 8 bytes each)
         self._max_requests = max(256, config.server.max_line // 8 + 1)
         self.stall_guard = StallGuard(self, config.stall_limit)

@@ -253,6 +253,12 @@ class RobotDistribution:
         self._stop_keep_trip(reason)
         self.watchdog.trip()
 
+    def protects(self, client: Client) -> bool:
+        """The owner, and the feeder of an armed watchdog, keep their connection when the
+        server must make room for a newcomer."""
+        return self.control.owner is client or (
+            self.watchdog.state == "armed" and self.watchdog.feeder is client)
+
     def client_lost(self, client: Client) -> None:
         if self.control.owner is client:
             log.info("control released: owner %s (%s) disconnected",
