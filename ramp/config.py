@@ -29,6 +29,7 @@ from ramp.hal import driver_class
 from ramp.hal.interfaces import Bus
 from ramp.layers.module import Module
 from ramp.layers.registry import module_class
+from ramp.layers.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S
 from ramp.schema import Field, FieldError, apply_fields, shorten
 
 #: A config file is a few kB; anything past this is refused before parsing.
@@ -147,7 +148,7 @@ SERVER_FIELDS = {
                         what="bytes of unsent responses before a client is cut off"),
 }
 WATCHDOG_FIELDS = {
-    "timeout": Field(float, 1.0, lo=0.001, hi=60.0, what="a timeout in seconds"),
+    "timeout": Field(float, 1.0, lo=MIN_TIMEOUT_S, hi=MAX_TIMEOUT_S, what="a timeout in seconds"),
 }
 SCHEDULER_FIELDS = {
     "rate_hz": Field(float, 100.0, lo=1.0, hi=1000.0, what="a tick rate in Hz"),

@@ -15,7 +15,7 @@ from typing import Literal
 from ramp.errors import DeviceError, RequestError
 from ramp.layers.control import Control
 from ramp.layers.module import Function, Module
-from ramp.layers.watchdog import Watchdog
+from ramp.layers.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S, Watchdog
 from ramp.mcp.messages import Request, Response, Value, error_response
 from ramp.mcp.params import FloatParam, NameParam
 
@@ -65,7 +65,7 @@ class RobotRequests(Module):
         self.layer = layer
         self.add(Function("robot", "modules", (), layer.list_modules, "read",
                           "list attached modules"))
-        self.add(Function("watchdog", "timeout", (FloatParam(0.0, 60.0, lo_open=True),),
+        self.add(Function("watchdog", "timeout", (FloatParam(MIN_TIMEOUT_S, MAX_TIMEOUT_S),),
                           layer.set_timeout, "state", "watchdog timeout in s"))
         self.add(Function("control", "acquire", (NameParam(reserved=("none",)),),
                           layer.acquire, "control", "become the owner (stops motion first)"))

@@ -12,6 +12,11 @@ from typing import Literal
 
 State = Literal["idle", "armed", "tripped"]
 
+#: Shortest timeout accepted (s): a few ticks. Anything shorter trips between two messages of
+#: a healthy client, and `1e-300` used to be accepted and shown as `0.0`.
+MIN_TIMEOUT_S = 0.05
+MAX_TIMEOUT_S = 60.0
+
 
 class Watchdog:
     def __init__(self, timeout: float = 1.0) -> None:

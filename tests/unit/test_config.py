@@ -49,7 +49,7 @@ modules:
     errs = errors_of(text)
     assert "ramp.yaml:1: server.port: 70000 is not a TCP port (0-65535)" in errs
     assert any(e.startswith("ramp.yaml:1: server.colour: unknown key") for e in errs)
-    assert "ramp.yaml:2: watchdog.timeout: 0 is not a timeout in seconds (0.001-60)" in errs
+    assert "ramp.yaml:2: watchdog.timeout: 0 is not a timeout in seconds (0.05-60)" in errs
     assert any(e.startswith("ramp.yaml:4: buses.io.driver: unknown driver 'warp'") for e in errs)
     assert any(e.startswith("ramp.yaml:8: modules.demo.motor.bus: 'nowhere' is not a bus")
                for e in errs)
