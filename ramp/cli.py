@@ -16,6 +16,9 @@ from ramp.errors import ConfigError
 
 log = logging.getLogger("ramp")
 
+#: Signals that stop every motor (zeros on the wire), then end `ramp run` with status 0.
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP, signal.SIGQUIT)
+
 
 class JournalFormatter(logging.Formatter):
     """Prefixes each line with its syslog priority (`<4>`), which journald reads, so
@@ -82,7 +85,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | None) -> int:
-    """Build, start and run until SIGTERM/SIGINT; motors are stopped before returning."""
+    """Build, start and run until a stop signal; motors are stopped before returning."""
     from ramp.clock import MonotonicClock
     from ramp.supervisor import Supervisor
     from ramp.systemd import SystemdNotifier
@@ -104,8 +107,10 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
         log.info("%s received: stopping every motor and exiting", signal.Signals(signum).name)
         sup.scheduler.stop()
 
-    signal.signal(signal.SIGTERM, on_signal)
-    signal.signal(signal.SIGINT, on_signal)
+    # SIGHUP (the terminal or SSH session went away) and SIGQUIT (Ctrl-backslash) used to end
+    # the process with the motors still commanded: every one of them stops the robot first.
+    for signum in STOP_SIGNALS:
+        signal.signal(signum, on_signal)
     try:
         sup.start()
     except Exception as exc:  # noqa: BLE001 - whatever failed, the motors must be stopped

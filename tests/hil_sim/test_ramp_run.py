@@ -76,3 +76,45 @@ def test_systemd_notify_protocol(tmp_path: Path) -> None:
         if proc.poll() is None:
             proc.kill()
         sock.close()
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("signum", [signal.SIGHUP, signal.SIGQUIT])
+def test_sighup_and_sigquit_stop_the_motors_on_the_wire_and_exit_0(
+        tmp_path: Path, signum: signal.Signals) -> None:
+    """A closed SSH session (SIGHUP) or Ctrl-\\ (SIGQUIT) ended the process with the motors
+    still commanded; they act as SIGTERM does. The base's Sabertooth bus is real here
+    (`sim: false`) on a pty emulator, so the zeros are read off the wire."""
+    from firmware_like.pty_link import PtyLink
+    from firmware_like.sabertooth import SabertoothEmulator, SabertoothPtyDevice
+    from tests.harness import MARTE_YAML
+
+    link = PtyLink("base_motors", tmp_path)
+    emu = SabertoothEmulator((128, 129))
+    device = SabertoothPtyDevice(link, emu)
+    cfg = tmp_path / "bench.yaml"
+    cfg.write_text(MARTE_YAML.replace(
+        "base_motors: {driver: sabertooth, port: /dev/ttyUSB0, baud: 9600, timeout: 0.5}",
+        f"base_motors: {{driver: sabertooth, port: {link.path}, baud: 9600, sim: false}}"))
+    proc, host, port = start(["--sim", "--config", str(cfg), "--host", "127.0.0.1",
+                              "--port", "0"], env={"TMPDIR": str(tmp_path)})
+    try:
+        with socket.create_connection((host, port), timeout=5) as s:
+            assert ask(s, "base:base.drive=(50,0)") == ""
+            for _ in range(10):
+                device.service(time.monotonic())
+                time.sleep(0.01)
+            assert emu.duty(128, 1) > 0.3
+            proc.send_signal(signum)
+            _, err = proc.communicate(timeout=10)
+        device.service(time.monotonic())
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+        link.close()
+    assert proc.returncode == 0, err
+    assert f"{signal.Signals(signum).name} received: stopping every motor" in err
+    assert "stopped: every motor commanded to zero" in err
+    assert all(emu.duty(a, m) == 0.0 for a in (128, 129) for m in (1, 2))
+    assert not emu.timed_out(128)  # the supervisor stopped them, not their own timeout
