@@ -12,7 +12,7 @@ from types import FrameType
 
 from ramp import __version__
 from ramp.config import Config, check_config, valid_host
-from ramp.errors import ConfigError
+from ramp.errors import ConfigError, RampError
 
 log = logging.getLogger("ramp")
 
@@ -74,6 +74,14 @@ def cmd_run(args: argparse.Namespace) -> int:
         _print_errors(errors)
         return EXIT_CONFIG
     assert config is not None
+    if not args.sim:
+        sim_buses = [ConfigError("the sim driver stands in for hardware only under "
+                                 "`ramp run --sim`; name the bus's real driver, or add --sim",
+                                 file=config.file, line=bc.line, key=f"buses.{bc.name}.driver")
+                     for bc in config.buses.values() if bc.driver == "sim"]
+        if sim_buses:
+            _print_errors(sim_buses)
+            return EXIT_CONFIG
     from ramp.server import ensure_fd_limit
 
     problem = ensure_fd_limit(config.server.max_clients, len(config.buses))
@@ -92,15 +100,28 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
 
     clock = MonotonicClock()
     backplane = None
-    if sim:
-        from ramp.sim import SimBackplane  # the one place ramp/ reaches firmware_like/
+    try:  # building drivers and modules checks what the config check cannot see
+        if sim:
+            from ramp.sim import SimBackplane  # the one place ramp/ reaches firmware_like/
 
-        backplane = SimBackplane(config)
-        sup = Supervisor(config, clock, bus_factory=backplane.bus_factory, host=host,
-                         port=port)
-        backplane.attach(sup)
-    else:
-        sup = Supervisor(config, clock, host=host, port=port)
+            backplane = SimBackplane(config)
+            sup = Supervisor(config, clock, bus_factory=backplane.bus_factory, host=host,
+                             port=port)
+            backplane.attach(sup)
+        else:
+            sup = Supervisor(config, clock, host=host, port=port)
+    except Exception as exc:  # noqa: BLE001 - nothing is open yet; say what and leave
+        if backplane is not None:
+            backplane.close()
+        if isinstance(exc, ConfigError):
+            _print_errors([ConfigError(exc.detail, file=exc.file or config.file,
+                                       line=exc.line, key=exc.key)])
+            return EXIT_CONFIG
+        if isinstance(exc, RampError):
+            log.error("cannot build the supervisor from %s: %s", config.file, exc)
+        else:  # a bug: its traceback helps whoever reads the log
+            log.exception("cannot build the supervisor from %s", config.file)
+        return 1
     notifier = SystemdNotifier()
 
     def on_signal(signum: int, frame: FrameType | None) -> None:

@@ -118,3 +118,21 @@ def test_sighup_and_sigquit_stop_the_motors_on_the_wire_and_exit_0(
     assert "stopped: every motor commanded to zero" in err
     assert all(emu.duty(a, m) == 0.0 for a in (128, 129) for m in (1, 2))
     assert not emu.timed_out(128)  # the supervisor stopped them, not their own timeout
+
+
+def test_a_sim_bus_without_sim_is_a_config_error_not_a_traceback(tmp_path: Path) -> None:
+    """`driver: sim` passes `ramp check` (the file may be meant for --sim); `ramp run`
+    without --sim used to build the bus outside any error handling and exit 1 with a
+    traceback."""
+    cfg = tmp_path / "sim.yaml"
+    cfg.write_text("server: {host: 127.0.0.1, port: 0}\nbuses:\n  io: {driver: sim}\n"
+                   "modules:\n  demo: {motor: {bus: io}, lamp: {bus: io}}\n")
+    check = subprocess.run([sys.executable, "-m", "ramp.cli", "check", str(cfg)], cwd=REPO,
+                           text=True, capture_output=True, timeout=30)
+    assert check.returncode == 0
+    proc = subprocess.run([sys.executable, "-m", "ramp.cli", "run", "--config", str(cfg)],
+                          cwd=REPO, text=True, capture_output=True, timeout=30)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.startswith(f"{cfg}:3: buses.io.driver: the sim driver stands in for "
+                                  "hardware only under `ramp run --sim`")
+    assert "Traceback" not in proc.stderr
