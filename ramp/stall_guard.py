@@ -10,7 +10,8 @@ Two halves, one per case:
 - **The loop is stuck and still stuck.** The loop cannot notice anything, so this thread
   does: it only reads two numbers the scheduler publishes (when the loop last made progress
   and which unit of work is running) and, on a stall longer than `limit`, writes zeros
-  through every driver. It is the one place RAMP starts a
+  through every driver that the loop is not inside (each bus has a lock; a bus the loop is
+  stuck in is left to its controller's own timeout). It is the one place RAMP starts a
   thread for control work, and it must: a stuck thread cannot rescue itself. When the loop
   comes back, its own handler stops the modules and logs the event; the thread logs only if
   the loop is still stuck one more `limit` later, since then nothing else will.
@@ -29,6 +30,9 @@ if TYPE_CHECKING:
     from ramp.supervisor import Supervisor
 
 log = logging.getLogger("ramp.stall")
+
+#: How long the guard waits for a bus the loop is using before leaving it alone.
+BUS_LOCK_WAIT_S = 0.02
 
 
 class StallGuard:
@@ -88,7 +92,7 @@ class StallGuard:
             self._fired_task = sched.current_task or "(between tasks)"
             self._reported = False
             self.stalls += 1
-        self.sup.stop_all_motors(alive)
+        self.sup.stop_all_motors(alive, BUS_LOCK_WAIT_S)
         return True
 
     def _watch(self) -> None:

@@ -133,12 +133,19 @@ class Supervisor:
             bus.close()  # zeros on the wire first, then the port closes
         self.server.close()
 
-    def stop_all_motors(self, alive_mark: float) -> None:
+    def stop_all_motors(self, alive_mark: float, lock_wait: float = 0.02) -> None:
         """Last resort (the stall guard's thread, the loop silent since `alive_mark`): zeros
-        straight to every driver. The loop, when it runs again, treats this as a stall, so
+        straight to every driver the loop is not inside (see the bus lock in
+        `ramp.hal.interfaces`). The loop, when it runs again, treats this as a stall, so
         the layers above agree with the wire."""
         self.scheduler.request_stall_stop(alive_mark)
-        self._zeros_everywhere()
+        for name, bus in self.buses.items():
+            try:
+                if not bus.try_stop_motors(lock_wait):
+                    log.error("bus %s: the tick loop is stuck inside its driver; its motors "
+                              "are left to the controller's own timeout", name)
+            except Exception as exc:  # noqa: BLE001 - every other bus must still stop
+                log.error("bus %s: could not stop motors: %s", name, exc)
 
     def _zeros_everywhere(self) -> None:
         for name, bus in self.buses.items():
