@@ -112,15 +112,24 @@ class Supervisor:
         self.server.start()
         self.running = True
 
-    def settle(self, limit: float = 2.0) -> None:
+    def settle(self, limit: float = 2.0, open_limit: float = 0.5) -> None:
         """Run the loop (serving) until every opened bus reports ready, at most `limit` s.
 
         Boards such as ODrives and Phidgets open at once but answer a moment later; the ready
         line waits for them so a client connecting right after sees its modules attached.
+        An open still running after `open_limit` (a device that does not answer) is not
+        waited for: its modules attach when it is done.
         """
-        end = self.clock.now() + limit
-        self.scheduler.run(lambda: self.clock.now() >= end or (not self.opener.in_flight and all(
-            b.ready() for b in self.buses.values() if b.is_open)))
+        start = self.clock.now()
+        end = start + limit
+
+        def settled() -> bool:
+            now = self.clock.now()
+            opening = self.opener.in_flight and now < start + open_limit
+            return now >= end or (not opening and all(
+                b.ready() for b in self.buses.values() if b.is_open))
+
+        self.scheduler.run(settled)
 
     def shutdown(self) -> None:
         """Stop every motor (zeros on the wire), close devices and the server. Idempotent."""

@@ -99,7 +99,7 @@ def test_a_hanging_open_and_reopen_leave_the_loop_and_other_modules_alone(
         assert sup.slots["demo"].state == "detached" and sup.slots["arm"].state == "ok"
         with socket.create_connection(sup.server.address, timeout=5) as s:
             rtts = serve_for(sup, 0.6, s)
-            assert rtts and max(rtts) < 0.2, rtts
+            assert rtts and max(rtts) < 0.5, rtts
             assert world.motors["arm.motor"] == pytest.approx(0.2)
             assert "bus io (sim): opening has hung" in caplog.text
             bus.release.set()  # the device answers at last
@@ -110,9 +110,9 @@ def test_a_hanging_open_and_reopen_leave_the_loop_and_other_modules_alone(
             bus.fail_next_tick = True
             rtts = serve_for(sup, 1.5, s)  # the retry comes after about a second
             assert bus.opens == 2
-            assert max(rtts) < 0.2, rtts
+            assert max(rtts) < 0.5, rtts
             assert sup.slots["demo"].state == "fault" and sup.slots["arm"].state == "ok"
-            assert sup.scheduler.stats.max_late_us < 100_000, sup.scheduler.stats
+            assert sup.scheduler.stats.max_late_us < 250_000, sup.scheduler.stats
             assert sup.scheduler.stalls == 0
     finally:
         bus.release.set()
@@ -122,8 +122,9 @@ def test_a_hanging_open_and_reopen_leave_the_loop_and_other_modules_alone(
 @pytest.mark.timeout(60)
 def test_a_socket_url_whose_peer_never_accepts_holds_nothing(tmp_path: Path) -> None:
     """A real `ramp run --sim` with the base's Sabertooth bus on `socket://` (sim: false) to a
-    listener whose backlog is full: ready in well under the 5 s connect timeout, and the
-    BLE answers at once throughout while the base stays detached."""
+    listener whose backlog is full: ready in well under the 5 s connect timeout (the ready
+    line waits for an open in flight at most half a second), and the BLE answers at once
+    throughout while the base stays detached."""
     listener = socket.socket()
     listener.bind(("127.0.0.1", 0))
     listener.listen(0)
@@ -159,7 +160,7 @@ def test_a_socket_url_whose_peer_never_accepts_holds_nothing(tmp_path: Path) -> 
         filler.close()
         listener.close()
     log = log_path.read_text()
-    assert ready_s < 4.0, (ready_s, log)
+    assert ready_s < 3.5, (ready_s, log)  # was 5.1 s: pyserial's 5 s connect, on the loop
     assert max(rtts) < 0.25, rtts
     assert rows["base.state"] == "detached" and rows["ble.state"] == "ok", rows
     assert int(rows["tick.late"].split(",")[2]) < 100_000, rows

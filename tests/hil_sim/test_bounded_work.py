@@ -1,10 +1,11 @@
 """Bounded work (SPEC 2.2): no client holds the loop past a tick's deadline, whatever it sends.
 
-A virtual clock cannot see how long a request takes, so here it is charged with the real time
+A virtual clock cannot see how long a request takes, so here it is charged with the CPU time
 the supervisor spends computing (never less than `FLOOR_S` per request): the idle wait between
-ticks is skipped, the work is not. A line of 227 `robot.get` requests used to sort the
-6,000-sample lateness window 227 times (hundreds of ms at 2 minutes of uptime), and even in a
-fresh process one line of gets or describes took longer than a tick.
+ticks is skipped, the work is not. CPU time of this thread, not wall time, so a busy machine
+that preempts the test does not make its ticks late. A line of 227 `robot.get` requests used
+to sort the 6,000-sample lateness window 227 times (hundreds of ms at 2 minutes of uptime),
+and even in a fresh process one line of gets or describes took longer than a tick.
 """
 
 from __future__ import annotations
@@ -31,16 +32,16 @@ class CostClock(VirtualClock):
 
     def __init__(self) -> None:
         super().__init__()
-        self._since = time.perf_counter()
+        self._since = time.thread_time()
 
     def now(self) -> float:
-        return self._now + (time.perf_counter() - self._since)
+        return self._now + (time.thread_time() - self._since)
 
     def set(self, t: float) -> None:
-        self._now, self._since = max(t, self._now), time.perf_counter()
+        self._now, self._since = max(t, self._now), time.thread_time()
 
     def advance(self, dt: float) -> None:
-        self._now, self._since = self.now() + dt, time.perf_counter()
+        self._now, self._since = self.now() + dt, time.thread_time()
 
 
 class Rig:
@@ -55,9 +56,9 @@ class Rig:
         one = self.sup.robot._one
 
         def charged(*args: object) -> object:  # a request costs at least FLOOR_S
-            t0 = time.perf_counter()
+            t0 = time.thread_time()
             out = one(*args)  # type: ignore[arg-type]
-            spent = time.perf_counter() - t0
+            spent = time.thread_time() - t0
             if spent < FLOOR_S:
                 self.clock.advance(FLOOR_S - spent)
             return out
@@ -208,8 +209,8 @@ def test_lines_of_reads_never_hold_a_real_process(tmp_path: Path) -> None:
     """`ramp run --sim` at 1 kHz, so its 6,000-sample lateness window is full after 6 s (at
     100 Hz that takes a minute). Then 5 full lines of `robot.get` and 5 of `base.describe`,
     sent at once: each `robot.get` used to sort the window, about 100 ms of one piece of work
-    per line; now no tick may be 50 ms late (1 kHz on a shared VM has ms hiccups of its own)
-    and nothing stalls."""
+    per line (ticks 135 ms late); now no tick may be 80 ms late (1 kHz on a shared VM has
+    hiccups of its own) and nothing stalls."""
     from tests.harness import MARTE_YAML
     from tests.harness import start_ramp as start
     from tests.hil_sim.test_abuse import HOST, Mcp
@@ -232,7 +233,7 @@ def test_lines_of_reads_never_hold_a_real_process(tmp_path: Path) -> None:
             assert reader.line().count(")") >= line.count("=()")
         after = rows(monitor)
         worst = int(after["tick.late"].split(",")[2])
-        assert worst < max(50_000, worst_before), after
+        assert worst < max(80_000, worst_before), after
         monitor.close()
         reader.close()
     finally:

@@ -146,7 +146,6 @@ def test_emfile_on_accept_backs_off_instead_of_spinning(
             sup.scheduler.run_for(0.5)
             assert 1 <= wrapped.calls <= 8, wrapped.calls  # about one try per 100 ms
             assert caplog.text.count("accept failed") == 1
-            assert sup.scheduler.stats.overruns == 0
             wrapped.failing = False  # a descriptor is free again
             sup.scheduler.run_for(0.25)
             assert len(server.clients) == 1
