@@ -1,8 +1,9 @@
 """Every number the MARTE physics model uses, each with where it comes from.
 
-Sources: "thesis p.N" is the page of /work/shared/thesis (chapter 5); "RMC 2014" is the
+Sources: "thesis p.N" is the page of ../shared/thesis (chapter 5); "RMC 2014" is the
 competition rules as summarised in the thesis and the SPEC; "hw-facts" is
-/work/shared/reference/hardware-facts.md; "SPEC" is /work/shared/SPEC.md. Anything else is
+../shared/reference/hardware-facts.md; "SPEC" is ../shared/SPEC.md (paths from a checkout
+next to the shared folder). Anything else is
 marked ASSUMPTION with the reason for the value chosen. Units are SI unless the name says
 otherwise.
 """

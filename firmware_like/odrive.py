@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 import struct
+from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
@@ -32,6 +33,9 @@ import can
 
 HEARTBEAT_PERIOD = 0.1
 ENCODER_PERIOD = 0.01
+#: Frames `rx_log` keeps, newest last: a minute of a four-axis drive refreshed at 20 Hz is
+#: about 4,800, and a simulated RMC run must not grow without bound.
+RX_LOG_FRAMES = 10_000
 _EPS = 1e-9  # float slack so a tick landing on a due time is not one slot late
 
 # CAN Simple command ids and 0.5.x enum values, written out independently of the driver.
@@ -92,8 +96,9 @@ class ODriveEmulator:
         self.vel_ramp_rate = vel_ramp_rate
         self.watchdog_timeout = watchdog_timeout
         self.vbus = vbus
-        #: Every frame received, with the `now` of the tick that read it (for tests).
-        self.rx_log: list[tuple[float, can.Message]] = []
+        #: The frames received lately (at most RX_LOG_FRAMES), with the `now` of the tick that
+        #: read each (for tests).
+        self.rx_log: deque[tuple[float, can.Message]] = deque(maxlen=RX_LOG_FRAMES)
         self._last_now: float | None = None
         self._next_heartbeat = 0.0
         self._next_encoder = 0.0

@@ -11,10 +11,13 @@ from collections.abc import Sequence
 from types import FrameType
 
 from ramp import __version__
-from ramp.config import Config, check_config
-from ramp.errors import ConfigError
+from ramp.config import Config, check_config, valid_host
+from ramp.errors import ConfigError, RampError
 
 log = logging.getLogger("ramp")
+
+#: Signals that stop every motor (zeros on the wire), then end `ramp run` with status 0.
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP, signal.SIGQUIT)
 
 
 class JournalFormatter(logging.Formatter):
@@ -46,13 +49,18 @@ def _print_errors(errors: list[ConfigError]) -> None:
         print(err, file=sys.stderr)
 
 
+#: Exit status for a configuration error, from `ramp check` and `ramp run` alike (the systemd
+#: unit does not restart on it: restarting cannot fix a file).
+EXIT_CONFIG = 2
+
+
 def cmd_check(args: argparse.Namespace) -> int:
     config, errors = check_config(args.file)
     if errors:
         _print_errors(errors)
         print(f"{args.file}: {len(errors)} error{'s' if len(errors) != 1 else ''}",
               file=sys.stderr)
-        return 1
+        return EXIT_CONFIG
     assert config is not None
     print(f"{args.file}: ok ({len(config.buses)} buses, {len(config.modules)} modules: "
           f"{', '.join(config.modules) or 'none'})")
@@ -64,36 +72,66 @@ def cmd_run(args: argparse.Namespace) -> int:
     config, errors = check_config(args.config)
     if errors:
         _print_errors(errors)
-        return 2
+        return EXIT_CONFIG
     assert config is not None
+    if not args.sim:
+        sim_buses = [ConfigError("the sim driver stands in for hardware only under "
+                                 "`ramp run --sim`; name the bus's real driver, or add --sim",
+                                 file=config.file, line=bc.line, key=f"buses.{bc.name}.driver")
+                     for bc in config.buses.values() if bc.driver == "sim"]
+        if sim_buses:
+            _print_errors(sim_buses)
+            return EXIT_CONFIG
+    from ramp.server import ensure_fd_limit
+
+    problem = ensure_fd_limit(config.server.max_clients, len(config.buses))
+    if problem is not None:
+        _print_errors([ConfigError(problem, file=config.file, key="server.max_clients",
+                                   line=config.lines.get("server.max_clients", 0))])
+        return EXIT_CONFIG
     return run_supervisor(config, sim=args.sim, host=args.host, port=args.port)
 
 
 def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | None) -> int:
-    """Build, start and run until SIGTERM/SIGINT; motors are stopped before returning."""
+    """Build, start and run until a stop signal; motors are stopped before returning."""
     from ramp.clock import MonotonicClock
     from ramp.supervisor import Supervisor
     from ramp.systemd import SystemdNotifier
 
     clock = MonotonicClock()
     backplane = None
-    if sim:
-        from ramp.sim import SimBackplane  # the one place ramp/ reaches firmware_like/
+    try:  # building drivers and modules checks what the config check cannot see
+        if sim:
+            from ramp.sim import SimBackplane  # the one place ramp/ reaches firmware_like/
 
-        backplane = SimBackplane(config)
-        sup = Supervisor(config, clock, bus_factory=backplane.bus_factory, host=host,
-                         port=port)
-        backplane.attach(sup)
-    else:
-        sup = Supervisor(config, clock, host=host, port=port)
+            backplane = SimBackplane(config)
+            sup = Supervisor(config, clock, bus_factory=backplane.bus_factory, host=host,
+                             port=port)
+            backplane.attach(sup)
+        else:
+            sup = Supervisor(config, clock, host=host, port=port)
+    except Exception as exc:  # noqa: BLE001 - nothing is open yet; say what and leave
+        if backplane is not None:
+            backplane.close()
+        if isinstance(exc, ConfigError):
+            _print_errors([ConfigError(exc.detail, file=exc.file or config.file,
+                                       line=exc.line, key=exc.key)])
+            return EXIT_CONFIG
+        if isinstance(exc, RampError):
+            log.error("cannot build the supervisor from %s: %s", config.file, exc)
+        else:  # a bug: its traceback helps whoever reads the log
+            log.exception("cannot build the supervisor from %s", config.file)
+        return 1
     notifier = SystemdNotifier()
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
         log.info("%s received: stopping every motor and exiting", signal.Signals(signum).name)
         sup.scheduler.stop()
 
-    signal.signal(signal.SIGTERM, on_signal)
-    signal.signal(signal.SIGINT, on_signal)
+    # SIGHUP (the terminal or SSH session went away) and SIGQUIT (Ctrl-backslash) used to end
+    # the process with the motors still commanded: every one of them stops the robot first.
+    for signum in STOP_SIGNALS:
+        signal.signal(signum, on_signal)
     try:
         sup.start()
     except Exception as exc:  # noqa: BLE001 - whatever failed, the motors must be stopped
@@ -106,9 +144,7 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
         if backplane is not None:
             backplane.close()
         return 1
-    from ramp.stall_guard import StallGuard
-
-    guard = StallGuard(sup, config.stall_limit)
+    guard = sup.stall_guard
     guard.start()
     notifier.attach(sup)
     sup.settle()
@@ -128,6 +164,24 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
     return 0
 
 
+def port_number(text: str) -> int:
+    """`--port`: 0-65535 (0 picks a free port); anything else is a usage error (exit 2)."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a TCP port (0-65535)") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{port} is not a TCP port (0-65535)")
+    return port
+
+
+def host_name(text: str) -> str:
+    """`--host`: an IP address or a host name, checked as `server.host` is."""
+    if not valid_host(text):
+        raise argparse.ArgumentTypeError(f"{text!r} is not an IP address or host name")
+    return text
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="ramp", description=__doc__)
     parser.add_argument("--version", action="version", version=f"ramp {__version__}")
@@ -136,8 +190,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--config", default="ramp.yaml", help="config file (default ./ramp.yaml)")
     run.add_argument("--sim", action="store_true",
                      help="replace every bus (except those with sim: false) by its emulator")
-    run.add_argument("--host", default=None, help="address to serve on (default: from config)")
-    run.add_argument("--port", type=int, default=None, help="TCP port (0 picks a free one)")
+    run.add_argument("--host", type=host_name, default=None,
+                     help="address to serve on (default: from config)")
+    run.add_argument("--port", type=port_number, default=None,
+                     help="TCP port, 0-65535 (0 picks a free one)")
     run.add_argument("--log-level", default="info",
                      choices=["debug", "info", "warning", "error"])
     run.set_defaults(func=cmd_run)

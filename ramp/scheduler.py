@@ -1,21 +1,35 @@
 """The one loop: a fixed-rate tick scheduler that services sockets and ports between ticks.
 
 Why this shape (see shared/reference/platform-limits.md): an absolute-deadline loop waiting in
-`select.select` (microsecond timeout) matches C `clock_nanosleep`, while epoll and asyncio
-round their timeouts up to whole milliseconds (about 0.6 ms late every tick). Input is
-dispatched the moment it arrives during the wait, so a request is answered on arrival, not at
-the next tick. Missed ticks are skipped, never replayed in a burst, and every overrun names
-the task that ate the budget.
+`select.select` (microsecond timeout) matches C `clock_nanosleep`, while epoll, poll and
+asyncio round their timeouts up to whole milliseconds (about 0.6 ms late every tick). But
+select cannot watch a descriptor numbered 1024 or more, and a server with many clients has
+some. So the wait is `poll` (no such limit) for the whole milliseconds, rounded down, then a
+microsecond `select` for the rest on the descriptors below 1024 (all of them, unless there are
+hundreds of clients; the others are looked at again right after). Input is dispatched the
+moment it arrives during the wait, so a request is answered on arrival, not at the next tick.
+Missed ticks are skipped, never replayed in a burst, and every overrun names the task that ate
+the budget.
 
 With a virtual clock the wait polls I/O once without blocking and jumps the clock to the next
 deadline, so simulated minutes pass in seconds and runs repeat exactly.
+
+Stalls (SPEC 2.2, *Stalls and freezes*): before every unit of work (a task, an I/O callback,
+the wait) the loop compares the clock with the start of the last tick. More than
+`stall_limit` since then means the loop did not run (a stuck task, a blocked call, the process
+stopped by the kernel or a debugger, a clock jump): `on_stall` runs first, before anything
+else can reach a wire, and the HAL asks `on_time()` before motion output, so a write computed
+before the gap is dropped even when the gap fell in the middle of a task.
 """
 
 from __future__ import annotations
 
+import bisect
+import contextlib
 import logging
 import math
 import select
+import threading
 import time
 from collections import deque
 from collections.abc import Callable
@@ -25,8 +39,18 @@ from ramp.clock import Clock, VirtualClock
 
 log = logging.getLogger("ramp.scheduler")
 
+#: select() cannot watch a descriptor from this number up (FD_SETSIZE).
+SELECT_FD_LIMIT = 1024
+_IN = select.POLLIN | select.POLLPRI
+_OUT = select.POLLOUT
+_GONE = select.POLLHUP | select.POLLERR  # the callback reads or writes, and learns why
+
 TaskFn = Callable[[float, float], None]
 IoCallback = Callable[[], None]
+#: Called with (gap in s, the unit of work during which the time went) when the loop stalled.
+StallHandler = Callable[[float, str], None]
+#: The unit of work a gap is blamed on when it fell between ticks.
+WAIT = "the wait between ticks"
 
 
 @dataclass
@@ -47,7 +71,12 @@ class ScheduledTask:
 
 @dataclass
 class TickStats:
-    """Lateness and overrun accounting, exposed through `robot.get`."""
+    """Lateness and overrun accounting, exposed through `robot.get`.
+
+    The window is also kept sorted, one insertion and one removal per tick (a memmove of a
+    few thousand floats, microseconds), so reading the percentiles costs the same at any age:
+    sorting the whole window on every `robot.get` once took 1-2 ms after a minute of uptime.
+    """
 
     window: int = 6000
     late_us: deque[float] = field(default_factory=deque)
@@ -56,20 +85,31 @@ class TickStats:
     overruns: int = 0
     skipped: int = 0
     last_overrun_task: str = ""
+    _sorted: list[float] = field(default_factory=list)
 
     def record(self, late_s: float) -> None:
-        us = late_s * 1e6
-        self.late_us.append(us)
-        if len(self.late_us) > self.window:
-            self.late_us.popleft()
-        self.max_late_us = max(self.max_late_us, us)
+        """A tick ran `late_s` after its deadline."""
+        self._add(late_s * 1e6)
         self.ticks += 1
+
+    def record_missed(self, late_s: float) -> None:
+        """A deadline passed `late_s` ago while a task still ran; that tick is skipped, but
+        how late the loop was shows in the figures (a task stuck for 2 s is a 2 s late tick)."""
+        self._add(late_s * 1e6)
+
+    def _add(self, us: float) -> None:
+        self.late_us.append(us)
+        bisect.insort(self._sorted, us)
+        if len(self.late_us) > self.window:
+            old = self.late_us.popleft()
+            del self._sorted[bisect.bisect_left(self._sorted, old)]
+        self.max_late_us = max(self.max_late_us, us)
 
     def percentiles(self) -> tuple[float, float, float]:
         """(p50, p99, max) lateness in µs over the recent window; max is since start."""
-        if not self.late_us:
+        if not self._sorted:
             return (0.0, 0.0, self.max_late_us)
-        data = sorted(self.late_us)
+        data = self._sorted
         return (_pick(data, 0.50), _pick(data, 0.99), self.max_late_us)
 
 
@@ -81,15 +121,30 @@ class Scheduler:
     """Runs tasks at integer divisors of a base rate, and I/O callbacks between ticks."""
 
     def __init__(self, clock: Clock, rate_hz: float = 100.0,
-                 overrun_log_interval: float = 5.0) -> None:
+                 overrun_log_interval: float = 5.0, stall_limit: float = 0.25) -> None:
         if not (math.isfinite(rate_hz) and 0 < rate_hz <= 2000):
             raise ValueError(f"scheduler rate {rate_hz} Hz is outside 0-2000")
         self.clock = clock
         self.rate_hz = float(rate_hz)
         self.period = 1.0 / self.rate_hz
+        #: A loop waiting out a long period is not stalled: never less than two periods.
+        self.stall_limit = max(stall_limit, 2 * self.period)
+        #: Set by the owner (the supervisor): stops every module. None: stalls are not checked.
+        self.on_stall: StallHandler | None = None
+        self.stalls = 0
+        self._beat: float | None = None  # clock time the last tick started
+        self._unit = WAIT  # the unit of work in progress (or last begun)
+        self._stall_requested = False  # set from the stall guard's thread ...
+        self._stall_lock = threading.Lock()  # ... under this lock, against handling it twice
+        self._handled_alive = -1.0  # `alive_at` of the last stall handled
         self.tasks: list[ScheduledTask] = []
         self.stats = TickStats()
         self._readers: dict[int, IoCallback] = {}
+        self._poller = select.poll()
+        #: Readers with input already read and not yet handled: served without waiting.
+        self._pending: set[int] = set()
+        #: Until when the I/O callback now running may work (the next tick's deadline).
+        self.io_deadline = math.inf
         self._rotation = 0
         self._writers: dict[int, IoCallback] = {}
         self._next: float | None = None
@@ -120,15 +175,37 @@ class Scheduler:
 
     def add_reader(self, fd: int, callback: IoCallback) -> None:
         self._readers[fd] = callback
+        self._watch(fd)
 
     def remove_reader(self, fd: int) -> None:
         self._readers.pop(fd, None)
+        self._pending.discard(fd)
+        self._watch(fd)
+
+    def set_pending(self, fd: int, pending: bool) -> None:
+        """A reader with work left over from its last turn (input already read) gets another
+        turn on the next pass, as if its fd were readable, without the wait blocking."""
+        if pending and fd in self._readers:
+            self._pending.add(fd)
+        else:
+            self._pending.discard(fd)
 
     def add_writer(self, fd: int, callback: IoCallback) -> None:
         self._writers[fd] = callback
+        self._watch(fd)
 
     def remove_writer(self, fd: int) -> None:
         self._writers.pop(fd, None)
+        self._watch(fd)
+
+    def _watch(self, fd: int) -> None:
+        """Tell the poller what `fd` is watched for now."""
+        mask = (_IN if fd in self._readers else 0) | (_OUT if fd in self._writers else 0)
+        if mask:
+            self._poller.register(fd, mask)  # registers or modifies
+        else:
+            with contextlib.suppress(KeyError):  # it was not watched
+                self._poller.unregister(fd)
 
     # -- running ------------------------------------------------------------------------------
     def stop(self) -> None:
@@ -139,6 +216,49 @@ class Scheduler:
     def stopping(self) -> bool:
         """True once `stop()` was called (from a signal handler, say)."""
         return self._stop
+
+    # -- stalls -------------------------------------------------------------------------------
+    def request_stall_stop(self, alive_mark: float) -> None:
+        """From another thread (the stall guard, which sent zeros when the loop had shown no
+        progress since `alive_mark`): treat that gap as a stall even if it is shorter than
+        this loop's own limit, unless the loop has already handled it."""
+        with self._stall_lock:
+            if alive_mark != self._handled_alive:
+                self._stall_requested = True
+
+    def on_time(self) -> bool:
+        """False while a stall has happened and not yet been handled: motion output computed
+        now was computed before the gap and must be dropped (the HAL asks before writing)."""
+        if self.on_stall is None or self._beat is None:
+            return True
+        return not self._stall_requested and self.clock.now() - self._beat <= self.stall_limit
+
+    def check_stall(self) -> bool:
+        """Handle a stall now if there was one (`on_stall` first, before any other output);
+        True when it did."""
+        if self.on_stall is None or self._beat is None:
+            return False
+        now = self.clock.now()
+        gap = now - self._beat
+        if gap <= self.stall_limit and not self._stall_requested:
+            return False
+        with self._stall_lock:
+            self._beat = now  # the handler's own output (zeros) is on time
+            self._stall_requested = False
+            self._handled_alive = self.alive_at
+        self.stalls += 1
+        try:
+            self.on_stall(gap, self._unit)
+        except Exception:
+            log.exception("stall handler raised")
+        return True
+
+    def _begin(self, unit: str) -> None:
+        """Before each unit of work: a gap is blamed on the unit that was running."""
+        self.check_stall()
+        self._unit = unit
+        self.current_task = unit
+        self.alive_at = time.perf_counter()
 
     def run(self, until: Callable[[], bool] | None = None) -> None:
         """Tick until `stop()` has been called or `until()` is true.
@@ -166,36 +286,62 @@ class Scheduler:
 
         With a `deadline`, dispatching stops once the clock passes it: the tick comes first,
         and whatever was not served is still readable on the next pass. The order rotates
-        each pass so a busy client early in the list cannot starve the ones after it.
+        each pass so a busy client early in the list cannot starve the ones after it. A
+        callback reads `io_deadline` to end its own turn in time.
         """
         self.alive_at = time.perf_counter()
         if not self._readers and not self._writers:
             return 0
-        try:
-            r, w, _ = select.select(list(self._readers), list(self._writers), [], timeout)
-        except InterruptedError:  # pragma: no cover - PEP 475 retries; kept for safety
-            return 0
-        except (OSError, ValueError):
-            self._drop_bad_fds()
-            return 0
+        if self._pending:
+            timeout = 0.0
+        r, w = self._ready(timeout)
+        if self._pending:
+            r = list(set(r) | self._pending)
         ready = [(fd, True) for fd in w] + [(fd, False) for fd in r]  # output first: it frees
         if len(ready) > 1:
             self._rotation = (self._rotation + 1) % len(ready)
             ready = ready[self._rotation:] + ready[:self._rotation]
         ran = 0
-        for fd, writable in ready:
-            if ran and deadline is not None and self.clock.now() >= deadline:
-                break
-            cb = (self._writers if writable else self._readers).get(fd)
-            if cb is not None:
-                self._guard(cb, f"{'output' if writable else 'input'} on fd {fd}")
-                ran += 1
+        self.io_deadline = math.inf if deadline is None else deadline
+        try:
+            for fd, writable in ready:
+                if ran and deadline is not None and self.clock.now() >= deadline:
+                    break
+                cb = (self._writers if writable else self._readers).get(fd)
+                if cb is not None:
+                    self._guard(cb, f"{'output' if writable else 'input'} on fd {fd}")
+                    ran += 1
+        finally:
+            self.io_deadline = math.inf
         self.alive_at = time.perf_counter()
         return ran
 
+    def _ready(self, timeout: float) -> tuple[list[int], list[int]]:
+        """(readable, writable) descriptors, waiting at most `timeout` (see the docstring at
+        the top: whole milliseconds in poll, the rest in a microsecond select)."""
+        ms = int(timeout * 1000)  # rounded down: poll rounds up
+        events = self._poller.poll(ms)
+        if not events and ms == 0 and timeout > 0:
+            low_r = [fd for fd in self._readers if fd < SELECT_FD_LIMIT]
+            low_w = [fd for fd in self._writers if fd < SELECT_FD_LIMIT]
+            with contextlib.suppress(OSError, ValueError):  # closed under us: poll says so
+                select.select(low_r, low_w, [], timeout)
+            events = self._poller.poll(0)
+        r: list[int] = []
+        w: list[int] = []
+        for fd, ev in events:
+            if ev & select.POLLNVAL:
+                self._drop_bad_fd(fd)
+                continue
+            if ev & (_IN | _GONE) and fd in self._readers:
+                r.append(fd)
+            if ev & (_OUT | _GONE) and fd in self._writers:
+                w.append(fd)
+        return r, w
+
     def _wait(self, deadline: float) -> None:
         if isinstance(self.clock, VirtualClock):
-            self.poll_io(0.0)
+            self.poll_io(0.0, deadline)
             if self.clock.now() < deadline:
                 self.clock.set(deadline)
             return
@@ -207,15 +353,17 @@ class Scheduler:
                     self.poll_io(0.0, deadline)
                 return
             polled = True
+            self._begin(WAIT)
             if not self._readers and not self._writers:
                 # Nothing to watch: sleep the remainder with a µs-precise wait.
-                self.alive_at = time.perf_counter()
                 select.select([], [], [], remaining)
                 continue
             self.poll_io(remaining, deadline)
 
     def _tick(self, deadline: float) -> None:
+        self.check_stall()  # a gap in the wait is handled before the first task
         now = self.clock.now()
+        self._beat = now
         late = max(0.0, now - deadline)
         self.stats.record(late)
         missed = int(late // self.period)
@@ -228,9 +376,8 @@ class Scheduler:
             task.next_index = (self._index // task.divisor + 1) * task.divisor
             tdt = task.divisor * self.period if task.last_run is None else now - task.last_run
             task.last_run = now
-            self.current_task = task.name
+            self._begin(task.name)
             t0 = self.clock.now()
-            self.alive_at = time.perf_counter()
             try:
                 task.fn(now, tdt)
             except Exception:
@@ -255,6 +402,7 @@ class Scheduler:
         # Tasks that ran past the next deadline: the overrun is this tick's, name its task.
         after = self.clock.now()
         if after > self._next:
+            self.stats.record_missed(after - self._next)
             extra = int((after - self._next) // self.period) + 1
             self.stats.overruns += 1
             self.stats.skipped += extra
@@ -278,8 +426,7 @@ class Scheduler:
             self._overruns_unlogged = 0
 
     def _guard(self, cb: IoCallback, what: str) -> None:
-        self.current_task = what
-        self.alive_at = time.perf_counter()
+        self._begin(what)
         try:
             cb()
         except Exception:
@@ -287,12 +434,10 @@ class Scheduler:
         finally:
             self.current_task = ""
 
-    def _drop_bad_fds(self) -> None:
-        """A closed fd left registered would make select fail forever: find and drop it."""
-        for table in (self._readers, self._writers):
-            for fd in list(table):
-                try:
-                    select.select([fd], [], [], 0)
-                except (OSError, ValueError):
-                    log.error("dropping closed file descriptor %d from the loop", fd)
-                    table.pop(fd, None)
+    def _drop_bad_fd(self, fd: int) -> None:
+        """A closed fd left registered would be reported forever: drop it."""
+        log.error("dropping closed file descriptor %d from the loop", fd)
+        self._readers.pop(fd, None)
+        self._writers.pop(fd, None)
+        self._pending.discard(fd)
+        self._watch(fd)

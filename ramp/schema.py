@@ -54,16 +54,24 @@ class Field:
         if self.kind is str and isinstance(v, int | float) and not isinstance(v, bool):
             v = str(v)
         if not isinstance(v, self.kind) or (self.kind is not bool and isinstance(v, bool)):
-            raise ValueError(f"{value!r} is not {self.expected()}")
+            raise ValueError(f"{shorten(repr(value))} is not {self.expected()}")
         if isinstance(v, float) and not math.isfinite(v):
-            raise ValueError(f"{value!r} is not {self.expected()}")
+            raise ValueError(f"{shorten(repr(value))} is not {self.expected()}")
         if self.choices is not None and v not in self.choices:
-            raise ValueError(f"{value!r} is not {self.expected()}")
+            raise ValueError(f"{shorten(repr(value))} is not {self.expected()}")
         if isinstance(v, int | float) and not isinstance(v, bool) and (
             (self.lo is not None and v < self.lo) or (self.hi is not None and v > self.hi)
         ):
-            raise ValueError(f"{value!r} is not {self.expected()}")
+            raise ValueError(f"{shorten(repr(value))} is not {self.expected()}")
         return v
+
+
+def shorten(text: str, limit: int = 60) -> str:
+    """`text` cut to `limit` characters, saying how long it was: error messages quote what
+    was given, and a value may be a megabyte long."""
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit - 20]}... ({len(text)} characters)"
 
 
 def _num(x: float) -> str:

@@ -1,42 +1,68 @@
 """Server layer: non-blocking MCP over TCP, serviced by the scheduler between ticks.
 
 One response line per request line, in order, per client. A client that stops reading is
-cut off once its unsent output passes a bound, so it can never block the loop or grow memory;
-a client that floods gets at most one small read's worth of work per wake-up, so the tick and
-the other clients keep their turn. A client that half-closes (sends FIN) is treated as gone for
-the watchdog and arbitration at once, but still receives every answer it is owed.
+cut off once its unsent output passes a bound, so it can never block the loop or grow memory.
+Work is bounded by time (SPEC 2.2, *Bounded work*): a client's turn reads at most one small
+chunk, then answers its queued messages request by request until the tick's deadline (or a
+short slice, so other clients interleave); whatever is left, even half a message, is taken up
+again in its next turn, after the tick. A client that half-closes (sends FIN) is treated as
+gone for the watchdog and arbitration at once, but still receives every answer it is owed.
 """
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import functools
 import logging
 import socket
-from collections.abc import Callable
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
 
 from ramp.layers.robot import Client
 from ramp.mcp.messages import Response, error_response
-from ramp.mcp.protocol import LineSplitter, TooLong, format_responses
+from ramp.mcp.protocol import LineSplitter, TooLong, format_response
 from ramp.scheduler import Scheduler
 
 log = logging.getLogger("ramp.server")
 
-# Work per wake-up is proportional to bytes read (about 5 us per byte for a flood of bare
-# newlines or gets, measured): 64 KiB once held the loop for 300 ms, long enough for the stall
-# guard to stop every motor. 1 KiB bounds one client's turn to a few ms; the rest waits in the
-# kernel, and select reports the socket readable again on the next pass.
+# One read per turn: 64 KiB once held the loop for 300 ms (about 5 us per byte of bare newlines
+# or gets), long enough for the stall guard to stop every motor. The rest waits in the kernel,
+# and select reports the socket readable again on the next pass.
 READ_CHUNK = 1024
+#: Longest a client's turn lasts even when the tick is far off, so other clients interleave.
+TURN_S = 0.002
+#: Always room for a stop (SPEC 2.2): with every slot taken, a newcomer evicts the client
+#: silent longest if it has sent no complete message for this long and is neither the owner
+#: nor the feeder, so an operator can always connect and send robot:robot.stop=().
+EVICT_SILENCE_S = 5.0
+#: Out of file descriptors (EMFILE): stop accepting for this long instead of spinning (the
+#: listening socket stays readable, and accept failed 130,924 times in 10 s); the client
+#: waits in the listen backlog meanwhile.
+ACCEPT_BACKOFF_S = 0.1
+_OUT_OF_FDS = (errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM)
+#: Descriptors the process needs besides its clients: stdio, the listening socket, logs, and
+#: each bus's port (a pty or USB adapter, a CAN socket, a vendor library's own).
+FD_RESERVE = 32
+FD_PER_BUS = 4
 
 
 class Connection(Client):
     """One TCP client: its socket, input splitter and pending output."""
 
-    def __init__(self, sock: socket.socket, peer: str, max_line: int) -> None:
+    def __init__(self, sock: socket.socket, peer: str, max_line: int, now: float) -> None:
         super().__init__(peer)
+        #: When its last complete message arrived (or when it connected).
+        self.last_message_at = now
         self.sock = sock
         self.fd = sock.fileno()
         self.splitter = LineSplitter(max_line)
+        #: Complete messages read and not yet answered, oldest first.
+        self.queue: deque[bytes | TooLong] = deque()
+        #: The message being answered: its remaining steps and its answer so far (formatted
+        #: step by step, so no single step formats thousands of responses).
+        self.steps: Iterator[list[Response]] | None = None
+        self.answer: list[bytes] = []
         self.out = bytearray()
         self.closed = False
         #: The client sent FIN: nothing more to read, answers still to deliver.
@@ -44,7 +70,9 @@ class Connection(Client):
         self.lost_reported = False
 
 
-Handler = Callable[[Connection, "bytes | TooLong"], list[Response]]
+#: One message -> its answer, one step per request (responses, possibly none, per step), so
+#: the server can stop between requests when the tick is due.
+Handler = Callable[[Connection, "bytes | TooLong"], Iterable[list[Response]]]
 
 
 class McpServer:
@@ -53,10 +81,13 @@ class McpServer:
     def __init__(self, scheduler: Scheduler, handler: Handler,
                  on_disconnect: Callable[[Connection], None], host: str = "127.0.0.1",
                  port: int = 5577, max_clients: int = 8, max_line: int = 4096,
-                 max_output: int = 1 << 20) -> None:
+                 max_output: int = 1 << 20,
+                 protected: Callable[[Connection], bool] | None = None) -> None:
         self.scheduler = scheduler
         self.handler = handler
         self.on_disconnect = on_disconnect
+        #: True for a client that must never be evicted (the owner, the feeder).
+        self.protected = protected or (lambda conn: False)
         self.host = host
         self.port = port
         self.max_clients = max_clients
@@ -66,6 +97,10 @@ class McpServer:
         self.sock: socket.socket | None = None
         self.accepted = 0
         self.refused = 0
+        self.evicted = 0
+        self.accept_failures = 0
+        self._accept_paused_until: float | None = None
+        self._accept_failures_logged = 0
 
     @property
     def address(self) -> tuple[str, int]:
@@ -78,10 +113,20 @@ class McpServer:
         sock = socket.socket(family, socket.SOCK_STREAM)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         sock.bind((self.host, self.port))
-        sock.listen(64)
+        # Room for every client to connect at once (a burst past the backlog waits 1 s for
+        # TCP to retry its SYN).
+        sock.listen(max(64, min(self.max_clients + 16, socket.SOMAXCONN)))
         sock.setblocking(False)
         self.sock = sock
         self.scheduler.add_reader(sock.fileno(), self._accept)
+        self.scheduler.add_task("server", self.scheduler.rate_hz, self._tick)
+
+    def _tick(self, now: float, dt: float) -> None:
+        """Accept again once a back-off after running out of descriptors is over."""
+        if self._accept_paused_until is not None and now >= self._accept_paused_until:
+            self._accept_paused_until = None
+            if self.sock is not None:
+                self.scheduler.add_reader(self.sock.fileno(), self._accept)
 
     def close(self) -> None:
         for conn in list(self.clients.values()):
@@ -100,61 +145,122 @@ class McpServer:
             except (BlockingIOError, InterruptedError):
                 return
             except OSError as exc:
-                log.error("accept failed: %s", exc)
+                self._accept_failed(exc)
                 return
             peer = f"{addr[0]}:{addr[1]}"
-            if len(self.clients) >= self.max_clients:
+            if len(self.clients) >= self.max_clients and not self._evict_for(peer):
                 self.refused += 1
-                log.warning("refused %s: already %d clients (server.max_clients)",
-                            peer, len(self.clients))
-                try:
-                    sock.setblocking(False)
-                    sock.send(b"robot:mcp.error=(busy,too many clients; at most "
-                              + str(self.max_clients).encode() + b")\n")
-                except OSError:
-                    pass
-                sock.close()
+                log.warning("refused %s: already %d clients (server.max_clients), none silent "
+                            "for %.0f s that is neither owner nor feeder", peer,
+                            len(self.clients), EVICT_SILENCE_S)
+                _say_and_close(sock, b"robot:mcp.error=(busy,too many clients; at most "
+                               + str(self.max_clients).encode() + b")\n")
                 continue
             sock.setblocking(False)
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            conn = Connection(sock, peer, self.max_line)
+            conn = Connection(sock, peer, self.max_line, self.scheduler.clock.now())
             self.clients[conn.fd] = conn
             self.accepted += 1
             self.scheduler.add_reader(conn.fd, functools.partial(self._readable, conn))
             log.info("client %s connected (%d of %d)", peer, len(self.clients),
                      self.max_clients)
 
+    def _evict_for(self, newcomer: str) -> bool:
+        """Make room for a newcomer: close the client silent longest, if it has sent no
+        complete message for EVICT_SILENCE_S and is neither the owner nor the feeder."""
+        now = self.scheduler.clock.now()
+        silent = [c for c in self.clients.values()
+                  if now - c.last_message_at >= EVICT_SILENCE_S and not self.protected(c)]
+        if not silent:
+            return False
+        victim = min(silent, key=lambda c: c.last_message_at)
+        quiet = now - victim.last_message_at
+        log.warning("client %s evicted: no message for %.1f s and %s needed its slot "
+                    "(server.max_clients %d)", victim.peer, quiet, newcomer, self.max_clients)
+        self.evicted += 1
+        self._drop(victim, f"evicted after {quiet:.1f} s of silence",
+                   farewell=b"robot:mcp.error=(busy,closed to make room for another client: "
+                   + f"no message for {quiet:.0f} s".encode() + b")\n")
+        return True
+
+    def _accept_failed(self, exc: OSError) -> None:
+        self.accept_failures += 1
+        if exc.errno not in _OUT_OF_FDS:
+            log.error("accept failed: %s", exc)
+            return
+        assert self.sock is not None
+        self.scheduler.remove_reader(self.sock.fileno())
+        self._accept_paused_until = self.scheduler.clock.now() + ACCEPT_BACKOFF_S
+        if self.accept_failures - self._accept_failures_logged >= 100 or \
+                self._accept_failures_logged == 0:
+            log.error("accept failed: %s (%d clients connected); new clients wait in the "
+                      "backlog, accepting again in %.0f ms (%d failures so far)",
+                      exc.strerror or exc, len(self.clients), ACCEPT_BACKOFF_S * 1e3,
+                      self.accept_failures)
+            self._accept_failures_logged = self.accept_failures
+
     # -- reading and answering ----------------------------------------------------------------
     def _readable(self, conn: Connection) -> None:
-        try:
-            data = conn.sock.recv(READ_CHUNK)
-        except (BlockingIOError, InterruptedError):
-            return
-        except OSError as exc:
-            self._drop(conn, f"read error: {exc.strerror or exc}")
-            return
-        if not data:
-            self._end_input(conn)
-            return
-        for msg in conn.splitter.feed(data):
-            answer = self._answer(conn, msg)
-            if conn.closed:
+        """A client's turn: read one chunk unless work is left over, then answer in time."""
+        end = min(self.scheduler.io_deadline, self.scheduler.clock.now() + TURN_S)
+        if conn.steps is None and not conn.queue:
+            try:
+                data = conn.sock.recv(READ_CHUNK)
+            except (BlockingIOError, InterruptedError):
                 return
-            conn.out += answer
+            except OSError as exc:
+                self._drop(conn, f"read error: {exc.strerror or exc}")
+                return
+            if not data:
+                self._end_input(conn)
+                return
+            messages = conn.splitter.feed(data)
+            if messages:
+                conn.last_message_at = self.scheduler.clock.now()
+                conn.queue.extend(messages)
+        self._work(conn, end)
+        if conn.closed:
+            return
+        self.scheduler.set_pending(conn.fd, conn.steps is not None or bool(conn.queue))
         self._flush(conn)
 
-    def _answer(self, conn: Connection, msg: bytes | TooLong) -> bytes:
-        """The one response line `msg` is owed, whatever goes wrong while making it.
+    def _work(self, conn: Connection, end: float) -> None:
+        """Answer queued messages request by request until `end` (at least one step)."""
+        clock = self.scheduler.clock
+        while conn.steps is not None or conn.queue:
+            if conn.steps is None:
+                msg = conn.queue.popleft()
+                conn.answer = []
+                try:
+                    conn.steps = iter(self.handler(conn, msg))
+                except Exception as exc:
+                    self._finish(conn, self._fault(conn, exc))
+                    continue
+            try:
+                part = next(conn.steps, None)
+                if part is None:
+                    self._finish(conn)
+                elif part:
+                    conn.answer.append("".join([format_response(r) for r in part])
+                                       .encode("ascii"))
+            except Exception as exc:
+                # Whatever went wrong (a get property reading NaN, which MCP cannot carry),
+                # the message is owed one line: otherwise the client's lines slip out of step.
+                self._finish(conn, self._fault(conn, exc))
+            if conn.closed or clock.now() >= end:
+                return
 
-        An exception here (a get property reading NaN, which MCP cannot carry) would otherwise
-        skip this message and the rest of the read, leaving the client's lines out of step.
-        """
-        try:
-            return format_responses(self.handler(conn, msg))
-        except Exception as exc:
-            log.exception("could not answer a message from %s", conn.peer)
-            return format_responses([error_response(
-                "robot", "mcp", "fault", f"internal error {type(exc).__name__}")])
+    def _finish(self, conn: Connection, instead: bytes | None = None) -> None:
+        """The message's one response line: its answer, or `instead` (a fault) alone."""
+        parts = conn.answer if instead is None else [instead]
+        conn.steps, conn.answer = None, []
+        if not conn.closed:
+            conn.out += b"".join(parts) + b"\n"
+
+    def _fault(self, conn: Connection, exc: Exception) -> bytes:
+        log.error("could not answer a message from %s", conn.peer, exc_info=exc)
+        return format_response(error_response(
+            "robot", "mcp", "fault", f"internal error {type(exc).__name__}")).encode("ascii")
 
     def _end_input(self, conn: Connection) -> None:
         """FIN from the client: it can command nothing more, but its answers are still owed.
@@ -192,13 +298,16 @@ class McpServer:
         else:
             self.scheduler.remove_writer(conn.fd)
 
-    def _drop(self, conn: Connection, why: str) -> None:
+    def _drop(self, conn: Connection, why: str, farewell: bytes = b"") -> None:
         if conn.closed:
             return
         conn.closed = True
         self.scheduler.remove_reader(conn.fd)
         self.scheduler.remove_writer(conn.fd)
         self.clients.pop(conn.fd, None)
+        if farewell:
+            with contextlib.suppress(OSError):
+                conn.sock.send(farewell)
         try:
             conn.sock.close()
         except OSError as exc:  # pragma: no cover
@@ -212,3 +321,33 @@ class McpServer:
         if not conn.lost_reported:
             conn.lost_reported = True
             self.on_disconnect(conn)
+
+
+def _say_and_close(sock: socket.socket, line: bytes) -> None:
+    with contextlib.suppress(OSError):
+        sock.setblocking(False)
+        sock.send(line)
+    sock.close()
+
+
+def ensure_fd_limit(max_clients: int, buses: int) -> str | None:
+    """Make sure this process may open the descriptors `max_clients` clients need: raise the
+    soft RLIMIT_NOFILE up to the hard one if it must. None when it may; otherwise why not
+    (an error for `server.max_clients`, checked before the supervisor starts)."""
+    import resource
+
+    needed = max_clients + FD_RESERVE + FD_PER_BUS * buses
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft == resource.RLIM_INFINITY or soft >= needed:
+        return None
+    if hard != resource.RLIM_INFINITY and hard < needed:
+        return (f"{max_clients} clients need about {needed} file descriptors, and this process "
+                f"may open at most {hard} (raise LimitNOFILE= in the service or `ulimit -n`, "
+                "or lower max_clients)")
+    try:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (needed, hard))
+    except (ValueError, OSError) as exc:
+        return f"cannot raise the file descriptor limit to {needed}: {exc}"
+    log.info("file descriptor limit raised from %d to %d for %d clients", soft, needed,
+             max_clients)
+    return None

@@ -425,6 +425,7 @@ class Shell:
             period = heartbeat_period(None)
         tty = self.out.isatty()
         status = EXIT_OK
+        tripped = False
         with Interrupt() as intr:
             responses, raw = self.ask_main(text)
             stop = stop_message(accepted_motion(requests, responses), self.catalog.modules)
@@ -448,16 +449,36 @@ class Shell:
                     beat, beat_raw = self.ask_main("")
                     if beat:
                         self.show(beat, beat_raw)
+                    if self.watchdog_state() == "tripped":
+                        tripped = True  # the robot stopped the motion: holding is over
+                        break
                     next_beat = max(next_beat + period, self.clock())
                     if tty:
                         self.out.write(f"\rheld {self.clock() - start:5.1f} s")
                         self.out.flush()
                 if tty:
                     self.out.write("\r\x1b[K")
+                tripped = tripped or self.watchdog_state() == "tripped"
             finally:
                 if stop:
                     status = self._send_stop(stop)
+        if tripped:
+            self.say("the watchdog tripped during the hold: the robot stopped the motion early "
+                     "(robot:robot.get=() shows watchdog.state; the supervisor's log says why)")
+            return EXIT_ERROR
         return status
+
+    def watchdog_state(self) -> str | None:
+        """`idle`, `armed` or `tripped`, read on the read-only connection (which never feeds
+        the watchdog); None when the robot cannot say."""
+        try:
+            rows = self.ask_reader("robot:robot.get=()", separate=True)
+        except ConnectionLost:
+            return None
+        for r in rows:
+            if (r.module, r.device, r.prop) == ("robot", "watchdog", "state") and r.values:
+                return str(r.values[0])
+        return None
 
     def _send_stop(self, stop: str) -> int:
         try:

@@ -5,6 +5,11 @@ Sabertooth buses by the Sabertooth firmware emulator behind a pty (the real driv
 real packets), CAN buses by the ODrive emulator on python-can's virtual bus, and Phidget
 boards by the HAL-level sim driver (USB cannot be emulated). All of them move one MARTE
 physics model, stepped by a scheduler task on the supervisor's clock.
+
+The model knows MARTE's signals (`base.lf_wheel`, `ble.lift_pot`, ...). A config with other
+module names, or devices the model has no physics for, still runs: those signals go to a
+plain sim driver's world instead (motors and outputs are recorded, inputs read 0), so a new
+robot's wiring can be tried under --sim before it has a physics model.
 """
 
 from __future__ import annotations
@@ -27,6 +32,70 @@ if TYPE_CHECKING:
 log = logging.getLogger("ramp.sim")
 
 
+class PlainSignals:
+    """The world of a plain sim driver: commands are remembered, inputs read zero."""
+
+    def __init__(self) -> None:
+        self.motors: dict[str, float] = {}
+        self.outputs: dict[str, bool] = {}
+
+    def set_motor(self, name: str, duty: float) -> None:
+        self.motors[name] = duty
+
+    def read_analog(self, name: str) -> float:
+        return 0.0
+
+    def read_digital(self, name: str) -> bool:
+        return False
+
+    def write_digital(self, name: str, on: bool) -> None:
+        self.outputs[name] = on
+
+    def read_bridge(self, name: str) -> float:
+        return 0.0
+
+    def bus_present(self, bus: str) -> bool:
+        return True
+
+
+class RoutedSignals:
+    """What the sim buses and the emulators drive: the physics model for every signal it
+    knows (it raises KeyError for the others), plain signals for the rest."""
+
+    def __init__(self, model: MarteWorld) -> None:
+        self.model = model
+        self.plain = PlainSignals()
+        self._plain_names: set[str] = set()
+
+    def _route(self, method: str, name: str, *args: Any) -> Any:
+        if name not in self._plain_names:
+            try:
+                return getattr(self.model, method)(name, *args)
+            except KeyError:
+                self._plain_names.add(name)
+                log.info("sim: %s is not a signal of the physics model; it is simulated "
+                         "plainly (commands recorded, inputs read 0)", name)
+        return getattr(self.plain, method)(name, *args)
+
+    def set_motor(self, name: str, duty: float) -> None:
+        self._route("set_motor", name, duty)
+
+    def read_analog(self, name: str) -> float:
+        return float(self._route("read_analog", name))
+
+    def read_digital(self, name: str) -> bool:
+        return bool(self._route("read_digital", name))
+
+    def write_digital(self, name: str, on: bool) -> None:
+        self._route("write_digital", name, on)
+
+    def read_bridge(self, name: str) -> float:
+        return float(self._route("read_bridge", name))
+
+    def bus_present(self, bus: str) -> bool:
+        return self.model.bus_present(bus)
+
+
 class SimBackplane:
     """Builds the simulated world and the bus for each config entry."""
 
@@ -34,6 +103,8 @@ class SimBackplane:
                  wire_level: bool = True) -> None:
         self.config = config
         self.world = world if world is not None else MarteWorld()
+        #: The signals buses and emulators drive: the model's, and plain ones for the rest.
+        self.signals = RoutedSignals(self.world)
         self.wire_level = wire_level
         self.devices: list[Any] = []  # emulated devices serviced every tick
         self._tmp = tempfile.TemporaryDirectory(prefix="ramp-sim-")
@@ -52,7 +123,7 @@ class SimBackplane:
             bus = self._wire_level(bc)
             if bus is not None:
                 return bus
-        return SimBus(bc.name, dict(bc.params), world=self.world)
+        return SimBus(bc.name, dict(bc.params), world=self.signals)
 
     def _wire_level(self, bc: BusConfig) -> Bus | None:
         """A real driver talking to an emulator, where one exists for this driver."""
@@ -80,7 +151,7 @@ class SimBackplane:
         from ramp.hal.sabertooth import SabertoothBus
 
         labels = self._motor_labels(bc.name, "address")
-        world = self.world
+        world = self.signals
 
         def on_motor(address: int, motor: int, duty: float) -> None:
             label = labels.get((address, motor))
@@ -107,7 +178,7 @@ class SimBackplane:
 
         labels = self._motor_labels(bc.name, "node_id")
         max_vel = float(bc.params["max_vel"])
-        world = self.world
+        world = self.signals
 
         def on_velocity(node: int, turns_per_s: float) -> None:
             label = labels.get(node)

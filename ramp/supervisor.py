@@ -8,9 +8,10 @@ a closed bus is retried about once a second and its modules re-attach when it is
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
+from ramp.bus_opener import BusOpener
 from ramp.clock import Clock, MonotonicClock
 from ramp.config import BusConfig, Config
 from ramp.errors import DeviceError
@@ -24,6 +25,7 @@ from ramp.mcp.messages import Response
 from ramp.mcp.protocol import TooLong, parse_message, too_long_response
 from ramp.scheduler import Scheduler
 from ramp.server import Connection, McpServer
+from ramp.stall_guard import StallGuard
 
 log = logging.getLogger("ramp.supervisor")
 
@@ -50,10 +52,14 @@ class Supervisor:
                  port: int | None = None) -> None:
         self.config = config
         self.clock = clock or MonotonicClock()
-        self.scheduler = Scheduler(self.clock, config.rate_hz)
+        self.scheduler = Scheduler(self.clock, config.rate_hz, stall_limit=config.stall_limit)
+        self.scheduler.on_stall = self._on_stall
         factory = bus_factory or default_bus_factory
         self.buses: dict[str, Bus] = {name: factory(bc) for name, bc in config.buses.items()}
+        for bus in self.buses.values():
+            bus.gate = self.scheduler.on_time  # motion computed before a stall never goes out
         self.bus_health = {name: BusHealth() for name in self.buses}
+        self.opener = BusOpener(inline=self.clock.virtual)
         slots: dict[str, ModuleSlot] = {}
         for name, mc in config.modules.items():
             devices = {
@@ -73,26 +79,28 @@ class Supervisor:
             host=host if host is not None else config.server.host,
             port=port if port is not None else config.server.port,
             max_clients=config.server.max_clients, max_line=config.server.max_line,
-            max_output=config.server.max_output)
+            max_output=config.server.max_output, protected=self.robot.protects)
         # max_line already bounds a message's work; every well-formed one fits (>= 8 bytes each)
         self._max_requests = max(256, config.server.max_line // 8 + 1)
+        self.stall_guard = StallGuard(self, config.stall_limit)
         self.started_at = 0.0
         self.running = False
-        self._stop_pending = False  # set from the stall guard's thread
 
     # -- lifecycle ----------------------------------------------------------------------------
     def start(self) -> None:
         """Open every bus (missing ones are retried later), attach modules, start serving."""
         now = self.clock.now()
         self.started_at = now
+        for name, bus in self.buses.items():  # in parallel: each open has its own thread
+            self._try_open(name, bus, now, quiet=True)
         for name, bus in self.buses.items():
-            self._try_open(name, bus, now)
+            if self.opener.busy(name):
+                self._try_open(name, bus, now)
         self._update_slots(now)
         sched = self.scheduler
         sched.add_task("buses", sched.rate_hz, self._tick_buses)
         sched.add_task("watchdog", sched.rate_hz, self.robot.tick)
         sched.add_task("hotplug", self._divisor_rate(1.0), self._retry_buses)
-        sched.add_task("safety", sched.rate_hz, self._safety_tick)
         for slot in self.slots.values():
             for task in slot.module.tasks():
                 rate = self._divisor_rate(task.rate_hz)
@@ -104,15 +112,24 @@ class Supervisor:
         self.server.start()
         self.running = True
 
-    def settle(self, limit: float = 2.0) -> None:
+    def settle(self, limit: float = 2.0, open_limit: float = 0.5) -> None:
         """Run the loop (serving) until every opened bus reports ready, at most `limit` s.
 
         Boards such as ODrives and Phidgets open at once but answer a moment later; the ready
         line waits for them so a client connecting right after sees its modules attached.
+        An open still running after `open_limit` (a device that does not answer) is not
+        waited for: its modules attach when it is done.
         """
-        end = self.clock.now() + limit
-        self.scheduler.run(lambda: self.clock.now() >= end or all(
-            b.ready() for b in self.buses.values() if b.is_open))
+        start = self.clock.now()
+        end = start + limit
+
+        def settled() -> bool:
+            now = self.clock.now()
+            opening = self.opener.in_flight and now < start + open_limit
+            return now >= end or (not opening and all(
+                b.ready() for b in self.buses.values() if b.is_open))
+
+        self.scheduler.run(settled)
 
     def shutdown(self) -> None:
         """Stop every motor (zeros on the wire), close devices and the server. Idempotent."""
@@ -120,25 +137,41 @@ class Supervisor:
             return
         self.running = False
         self.robot.stop_all("shutdown")
+        self.opener.cancel_all()
         for bus in self.buses.values():
             bus.close()  # zeros on the wire first, then the port closes
         self.server.close()
 
-    def stop_all_motors(self) -> None:
-        """Last resort (the stall guard's thread): zeros straight to every driver. The loop
-        then stops every module on its next tick, so the layers above agree with the wire."""
-        self._stop_pending = True
+    def stop_all_motors(self, alive_mark: float, lock_wait: float = 0.02) -> None:
+        """Last resort (the stall guard's thread, the loop silent since `alive_mark`): zeros
+        straight to every driver the loop is not inside (see the bus lock in
+        `ramp.hal.interfaces`). The loop, when it runs again, treats this as a stall, so
+        the layers above agree with the wire."""
+        self.scheduler.request_stall_stop(alive_mark)
         for name, bus in self.buses.items():
             try:
-                bus.stop_motors()
-            except Exception as exc:  # noqa: BLE001
+                if not bus.try_stop_motors(lock_wait):
+                    log.error("bus %s: the tick loop is stuck inside its driver; its motors "
+                              "are left to the controller's own timeout", name)
+            except Exception as exc:  # noqa: BLE001 - every other bus must still stop
                 log.error("bus %s: could not stop motors: %s", name, exc)
 
-    def _safety_tick(self, now: float, dt: float) -> None:
-        """After a stall, the modules learn that their motors were stopped under them."""
-        if self._stop_pending:
-            self._stop_pending = False
-            self.robot.stop_all("tick loop stalled")
+    def _zeros_everywhere(self) -> None:
+        for name, bus in self.buses.items():
+            if not bus.is_open:
+                continue
+            try:
+                bus.stop_motors()
+            except Exception as exc:  # noqa: BLE001 - every other bus must still stop
+                log.error("bus %s: could not stop motors: %s", name, exc)
+
+    def _on_stall(self, gap: float, unit: str) -> None:
+        """The loop lost more than `stall_limit` (SPEC 2.2). Before anything else goes out:
+        zeros on every wire, which also turns every queued command and every refresh value
+        into a zero; then every module stops and the watchdog trips."""
+        self._zeros_everywhere()
+        self.robot.stalled("tick loop stalled")
+        self.stall_guard.loop_stalled(gap, unit)
 
     def _divisor_rate(self, wanted_hz: float) -> float:
         """The rate nearest `wanted_hz` that divides the base rate (at most the base rate)."""
@@ -146,13 +179,16 @@ class Supervisor:
         return self.scheduler.rate_hz / divisor
 
     # -- requests -----------------------------------------------------------------------------
-    def _handle(self, conn: Connection, msg: bytes | TooLong) -> list[Response]:
+    def _handle(self, conn: Connection, msg: bytes | TooLong) -> Iterator[list[Response]]:
+        """One message's answer, one request per step (the server stops between steps when
+        the tick is due). Nothing runs before the first step."""
         now = self.clock.now()
         if isinstance(msg, TooLong):
             self.robot.feed(conn, now)
-            return [too_long_response(self.config.server.max_line)]
+            yield [too_long_response(self.config.server.max_line)]
+            return
         parsed = parse_message(msg, max_requests=self._max_requests)
-        return self.robot.handle(conn, parsed.requests, now, parsed.syntax_error)
+        yield from self.robot.handle_steps(conn, parsed.requests, now, parsed.syntax_error)
 
     def _health(self) -> Health:
         s = self.scheduler.stats
@@ -161,23 +197,31 @@ class Supervisor:
                       clients=len(self.server.clients))
 
     # -- buses and attachment -----------------------------------------------------------------
-    def _try_open(self, name: str, bus: Bus, now: float) -> bool:
-        try:
-            bus.open(now)
-        except DeviceError as exc:
-            health = self.bus_health[name]
-            if health.reason != exc.detail:
-                log.warning("bus %s (%s) unavailable: %s; retrying every %.0f s", name,
-                            bus.driver_name, exc.detail, RETRY_PERIOD)
-            health.reason = exc.detail
-            health.next_retry = now + RETRY_PERIOD
-            bus.close()
+    def _try_open(self, name: str, bus: Bus, now: float, quiet: bool = False) -> bool:
+        """Open a bus without holding the loop (see `ramp.bus_opener`); True once it is open.
+        A failure waits RETRY_PERIOD before the next try; an open still running is looked at
+        again on the next tick. `quiet`: start it and do not wait (the others start too)."""
+        if quiet and not self.opener.inline:
+            self.opener.open(name, bus, now)
             return False
-        self.bus_health[name].reason = ""
+        result = self.opener.open(name, bus, now)
+        if result is False:
+            return False
+        health = self.bus_health[name]
+        if isinstance(result, DeviceError):
+            if health.reason != result.detail:
+                log.warning("bus %s (%s) unavailable: %s; retrying every %.0f s", name,
+                            bus.driver_name, result.detail, RETRY_PERIOD)
+            health.reason = result.detail
+            health.next_retry = now + RETRY_PERIOD
+            return False
+        health.reason = ""
         log.info("bus %s (%s) open", name, bus.driver_name)
         return True
 
     def _tick_buses(self, now: float, dt: float) -> None:
+        if self.opener.in_flight:
+            self._collect_opens(now)
         for name, bus in self.buses.items():
             if not bus.is_open:
                 continue
@@ -187,10 +231,18 @@ class Supervisor:
                 self._bus_fault(name, exc, now)
         self._update_slots(now)
 
+    def _collect_opens(self, now: float) -> None:
+        """Opens that were still running: take their results as soon as they are in."""
+        for name, bus in self.buses.items():
+            was_down = self.bus_health[name].reason != BusHealth.reason
+            if self.opener.busy(name) and self._try_open(name, bus, now) and was_down:
+                log.info("bus %s is back", name)
+
     def _retry_buses(self, now: float, dt: float) -> None:
         reopened = False
         for name, bus in self.buses.items():
-            if (not bus.is_open and now >= self.bus_health[name].next_retry
+            if (not bus.is_open and not self.opener.busy(name)
+                    and now >= self.bus_health[name].next_retry
                     and self._try_open(name, bus, now)):
                 log.info("bus %s is back", name)
                 reopened = True

@@ -8,14 +8,21 @@ hold dangling references across a hot-plug.
 Template pattern (as python-can's `BusABC`): public methods validate and record, drivers
 implement the `_`-prefixed hooks. Nothing here blocks: reads return the newest sample the
 bus's `tick` collected, writes are queued and flushed by `tick`.
+
+Each bus has a lock, held by every public method that reaches its driver (open, tick, a
+motor or output command, stop, close). Only one other thread ever takes it: the stall guard,
+which writes zeros while the loop is stuck, and which must never do so while the loop is
+inside the same pyserial object; it waits a moment for the lock and otherwise leaves that
+bus to its controller's own timeout (`try_stop_motors`).
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import threading
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
 from ramp.errors import ConfigError
@@ -43,8 +50,16 @@ class MotorChannel(ABC):
             raise ValueError(f"{self.label}: duty must be a finite number, got {duty!r}")
         if not -1.0 <= duty <= 1.0:
             raise ValueError(f"{self.label}: duty {duty} is outside -1..1")
-        self._duty = float(duty)
-        self._apply(self._duty)
+        bus = self.bus
+        if bus is None:
+            self._duty = float(duty)
+            self._apply(self._duty)
+            return
+        if not bus.gate():
+            return  # computed before a stall: the loop's stall handler stops this motor
+        with bus.lock:
+            self._duty = float(duty)
+            self._apply(self._duty)
 
     @abstractmethod
     def _apply(self, duty: float) -> None:
@@ -90,8 +105,13 @@ class DigitalOutput(ABC):
     def write(self, on: bool) -> None:
         on = bool(on)
         if on != self._state:
-            self._state = on
-            self._apply(on)
+            if self.bus is None:
+                self._state = on
+                self._apply(on)
+                return
+            with self.bus.lock:
+                self._state = on
+                self._apply(on)
 
     @abstractmethod
     def _apply(self, on: bool) -> None:
@@ -108,6 +128,10 @@ class BridgeInput(ABC):
     @abstractmethod
     def read(self) -> float:
         """The newest ratio, in mV/V."""
+
+
+def _always() -> bool:
+    return True
 
 
 class Bus(ABC):
@@ -130,6 +154,11 @@ class Bus(ABC):
         self.params = dict(params)
         self.is_open = False
         self.motors: list[MotorChannel] = []
+        #: Asked before motion output; False means the loop has stalled and not yet stopped
+        #: everything, so what is about to go out is stale. The supervisor sets it.
+        self.gate: Callable[[], bool] = _always
+        #: Held while the loop (or the stall guard) is inside the driver; see the docstring.
+        self.lock = threading.RLock()
 
     def check_params(self, params: Mapping[str, Any]) -> dict[str, Any]:
         """This driver's keys of `params`, checked against `fields`, defaults filled in.
@@ -170,31 +199,51 @@ class Bus(ABC):
     def open(self, now: float) -> None:
         if self.is_open:
             return
-        self._open(now)
-        self.is_open = True
+        with self.lock:
+            self._open(now)
+            self.is_open = True
 
     def tick(self, now: float, dt: float) -> None:
-        if self.is_open:
-            self._tick(now, dt)
+        if self.is_open and self.gate():  # no refresh of a pre-stall value
+            with self.lock:
+                self._tick(now, dt)
 
     def stop_motors(self) -> None:
         """Command zero on every motor channel and push it to the wire now."""
         for m in self.motors:
             m._duty = 0.0
         if self.is_open:
-            self._stop_motors()
+            with self.lock:
+                if self.is_open:
+                    self._stop_motors()
+
+    def try_stop_motors(self, wait: float) -> bool:
+        """`stop_motors` from another thread (the stall guard): False, and nothing written,
+        when the loop has been inside this bus's driver for longer than `wait`."""
+        if not self.is_open:
+            return True
+        if not self.lock.acquire(timeout=wait):
+            return False
+        try:
+            self.stop_motors()
+        finally:
+            self.lock.release()
+        return True
 
     def close(self) -> None:
         if not self.is_open:
             return
-        try:
-            self.stop_motors()
-        except Exception as exc:  # noqa: BLE001 - closing must always finish
-            logging.getLogger("ramp.hal").error("bus %s: could not stop motors on close: %s",
-                                                self.name, exc)
-        finally:
-            self.is_open = False
-            self._close()
+        with self.lock:
+            if not self.is_open:
+                return
+            try:
+                self.stop_motors()
+            except Exception as exc:  # noqa: BLE001 - closing must always finish
+                logging.getLogger("ramp.hal").error(
+                    "bus %s: could not stop motors on close: %s", self.name, exc)
+            finally:
+                self.is_open = False
+                self._close()
 
     def ready(self) -> bool:
         """True once the device answers: open, and (for boards that attach asynchronously,

@@ -60,6 +60,9 @@ _BLOCKING_TRIES: Final = 10
 _BLOCKING_WAIT_S: Final = 0.02
 #: pyserial handlers that live in-process and have no file descriptor to poll.
 _IN_PROCESS_URLS: Final = ("loop://",)
+#: Commands whose data byte is a motor speed (0 = stop).
+_MOTOR_COMMANDS: Final = (codec.CMD_M1_FORWARD, codec.CMD_M1_BACKWARD, codec.CMD_M2_FORWARD,
+                          codec.CMD_M2_BACKWARD)
 
 Key = tuple[int, int]  # (address, motor)
 
@@ -134,6 +137,7 @@ class SabertoothBus(Bus):
         self._sent_at: dict[Key, float] = {}
         self._programmed_at: dict[int, float] = {}
         self._tail = b""
+        self._tail_packet = b""  # the motor packet `_tail` finishes (b"" when not one)
         self._tokens = float(BURST_BYTES)
         self._refilled_at = self._now
         self._wire_free_at = self._now  # when the bytes written so far will have left
@@ -232,10 +236,11 @@ class SabertoothBus(Bus):
     def _stop_motors(self) -> None:
         """Zeros for every channel, written now whatever the budget: stopping is a safety
         action, and a few dozen bytes over budget once is harmless. Any half-written packet
-        is finished first so the zeros are not swallowed by a broken packet."""
+        is finished first so the zeros are not swallowed by a broken packet; a motor command
+        is finished as speed 0, so nothing queued before the stop moves a motor."""
         self._pending.clear()
-        data = bytearray(self._tail)
-        self._tail = b""
+        data = bytearray(self._tail_as_stop())
+        self._tail, self._tail_packet = b"", b""
         for key, ch in self._channels.items():
             pkt = codec.encode_motor(ch.address, ch.motor, 0.0)
             data += pkt
@@ -244,9 +249,17 @@ class SabertoothBus(Bus):
             self.stats["packets_sent"] += 1
         self._write_blocking(bytes(data))
 
+    def _tail_as_stop(self) -> bytes:
+        """The rest of a half-written packet. Its address (and maybe command) byte is out, so
+        it must be completed; a motor command is completed with speed 0 and its checksum."""
+        tail, packet = self._tail, self._tail_packet
+        if not tail or not packet or packet[1] not in _MOTOR_COMMANDS:
+            return tail
+        return codec.encode(packet[0], packet[1], 0)[len(packet) - len(tail):]
+
     def _close(self) -> None:
         ser, self._ser, self._fd = self._ser, None, None
-        self._tail = b""
+        self._tail, self._tail_packet = b"", b""
         self._pending.clear()
         if ser is not None:
             _release(ser)
@@ -306,6 +319,7 @@ class SabertoothBus(Bus):
                 self._tail = self._tail[n:]
                 if self._tail:
                     return
+                self._tail_packet = b""
             while True:
                 if self._tokens < codec.PACKET_LEN:
                     if self._pending or self._something_due():
@@ -320,7 +334,7 @@ class SabertoothBus(Bus):
                 self.stats["packets_sent"] += 1
                 n = self._write_some(pkt)
                 if n < len(pkt):
-                    self._tail = pkt[n:]
+                    self._tail, self._tail_packet = pkt[n:], pkt
                     self.stats["short_writes"] += 1
                     return
         except DeviceError as exc:
@@ -380,7 +394,7 @@ class SabertoothBus(Bus):
                     select.select([], [self._fd], [], _BLOCKING_WAIT_S)
                 except (OSError, ValueError) as exc:
                     raise DeviceError(self.name, f"{self.port} failed: {exc}") from exc
-        self._tail = rest  # finished by the next pump, before anything else
+        self._tail, self._tail_packet = rest, b""  # finished by the next pump, first
         raise DeviceError(self.name, f"{self.port} does not take bytes (output stalled)")
 
     def _check_alive(self) -> None:

@@ -8,14 +8,14 @@ SPEC's order: module known, module state, device and function, parameters, owner
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Literal
 
 from ramp.errors import DeviceError, RequestError
 from ramp.layers.control import Control
 from ramp.layers.module import Function, Module
-from ramp.layers.watchdog import Watchdog
+from ramp.layers.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S, Watchdog
 from ramp.mcp.messages import Request, Response, Value, error_response
 from ramp.mcp.params import FloatParam, NameParam
 
@@ -65,7 +65,7 @@ class RobotRequests(Module):
         self.layer = layer
         self.add(Function("robot", "modules", (), layer.list_modules, "read",
                           "list attached modules"))
-        self.add(Function("watchdog", "timeout", (FloatParam(0.0, 60.0, lo_open=True),),
+        self.add(Function("watchdog", "timeout", (FloatParam(MIN_TIMEOUT_S, MAX_TIMEOUT_S),),
                           layer.set_timeout, "state", "watchdog timeout in s"))
         self.add(Function("control", "acquire", (NameParam(reserved=("none",)),),
                           layer.acquire, "control", "become the owner (stops motion first)"))
@@ -118,17 +118,21 @@ class RobotDistribution:
     # -- messages -----------------------------------------------------------------------------
     def handle(self, client: Client, requests: tuple[Request, ...], now: float,
                tail: Response | None = None) -> list[Response]:
-        """Every request of one message, in order; `tail` (a syntax error) ends the answer.
+        """Every request of one message, in order; `tail` (a syntax error) ends the answer."""
+        return [r for part in self.handle_steps(client, requests, now, tail) for r in part]
 
-        Every complete message feeds the watchdog if its sender is the feeder.
+    def handle_steps(self, client: Client, requests: tuple[Request, ...], now: float,
+                     tail: Response | None = None) -> Iterator[list[Response]]:
+        """The same, one request per step, so the server can pause between requests.
+
+        Every complete message feeds the watchdog if its sender is the feeder, as soon as it
+        has arrived (before its requests, which may be answered over several turns).
         """
-        out: list[Response] = []
-        for req in requests:
-            out.extend(self._one(client, req, now))
-        if tail is not None:
-            out.append(tail)
         self.watchdog.feed(client, now)
-        return out
+        for req in requests:
+            yield self._one(client, req, now)
+        if tail is not None:
+            yield [tail]
 
     def feed(self, client: Client, now: float) -> None:
         """A complete message that carried no requests we could read (too long) still feeds."""
@@ -242,6 +246,18 @@ class RobotDistribution:
             log.warning("watchdog expired: %s silent for %.2f s; stopping every module",
                         peer, now - self.watchdog.last_feed)
             self._stop_keep_trip("watchdog expired")
+
+    def stalled(self, reason: str) -> None:
+        """The loop lost time (SPEC 2.2, stalls and freezes): every attached module stops and
+        the watchdog reads `tripped` until the next accepted motion request."""
+        self._stop_keep_trip(reason)
+        self.watchdog.trip()
+
+    def protects(self, client: Client) -> bool:
+        """The owner, and the feeder of an armed watchdog, keep their connection when the
+        server must make room for a newcomer."""
+        return self.control.owner is client or (
+            self.watchdog.state == "armed" and self.watchdog.feeder is client)
 
     def client_lost(self, client: Client) -> None:
         if self.control.owner is client:

@@ -12,6 +12,11 @@ from typing import Literal
 
 State = Literal["idle", "armed", "tripped"]
 
+#: Shortest timeout accepted (s): a few ticks. Anything shorter trips between two messages of
+#: a healthy client, and `1e-300` used to be accepted and shown as `0.0`.
+MIN_TIMEOUT_S = 0.05
+MAX_TIMEOUT_S = 60.0
+
 
 class Watchdog:
     def __init__(self, timeout: float = 1.0) -> None:
@@ -48,6 +53,11 @@ class Watchdog:
             self._trip()
             return True
         return False
+
+    def trip(self) -> None:
+        """Motion was stopped under the robot (a stalled loop): `tripped` until the next
+        accepted motion request, whatever the state was."""
+        self._trip()
 
     def client_lost(self, client: object) -> bool:
         """True when the lost client was feeding an armed watchdog (the caller stops)."""

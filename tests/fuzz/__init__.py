@@ -179,7 +179,8 @@ def spec_int_in(lo: int, hi: int) -> Check:
 
 _INT_VEL = spec_int_in(-100, 100)
 _FLAG: Check = lambda t: t in ("0", "1")  # noqa: E731
-_TIMEOUT: Check = lambda t: (v := spec_float(t)) is not None and 0 < v <= 60  # noqa: E731
+# SPEC 2.1 says 0 < t <= 60; the watchdog refuses less than 0.05 s (issue 9, item 7)
+_TIMEOUT: Check = lambda t: (v := spec_float(t)) is not None and 0.05 <= v <= 60  # noqa: E731
 _NAME: Check = lambda t: spec_name(t) is not None  # noqa: E731
 
 DEMO_TABLE: dict[str, dict[tuple[str, str], tuple[tuple[Check, ...], str]]] = {
@@ -268,7 +269,7 @@ EDGE_NUMBERS = [
     "100", "-100", "+100", "101", "-101", "99", "0100", "-0100", "00000000000000000100",
     "100.0", "99.5", "1e2", "1E2", "1e+2", "1.0e2", "60", "60.0", "60.0000001", "6e1", "59.999",
     "0.001", "1e-3", "1e-300", "4.9e-324", "5e-324", "2.2250738585072014e-308", "1e-400",
-    "0.5", ".5", "5.", "1.0", "1.0000000001", "0.9999999999", "0.99", "0.01",
+    "0.5", ".5", "5.", "1.0", "1.0000000001", "0.9999999999", "0.99", "0.01", "0.05", "0.049",
     "9223372036854775807", "-9223372036854775808", "9223372036854775808",
     "-9223372036854775809", "18446744073709551615", "18446744073709551616",
     "2147483647", "-2147483648", "4294967296",
@@ -304,7 +305,7 @@ blank = st.text(alphabet=" \t", max_size=3)
 #: Parameters each demo function accepts, so requests get past the checks often enough to
 #: exercise arbitration and the watchdog, not only the error paths.
 VALID_PARAMS: dict[tuple[str, str], st.SearchStrategy[list[str]]] = {
-    ("watchdog", "timeout"): st.sampled_from(["0.5", "1", "60", "0.001", "2.5e1"]).map(
+    ("watchdog", "timeout"): st.sampled_from(["0.5", "1", "60", "0.05", "2.5e1"]).map(
         lambda t: [t]),
     ("control", "acquire"): st.sampled_from(["op", "autonomy", "A-1", "x" * 32]).map(
         lambda t: [t]),

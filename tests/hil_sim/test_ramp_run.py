@@ -76,3 +76,63 @@ def test_systemd_notify_protocol(tmp_path: Path) -> None:
         if proc.poll() is None:
             proc.kill()
         sock.close()
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("signum", [signal.SIGHUP, signal.SIGQUIT])
+def test_sighup_and_sigquit_stop_the_motors_on_the_wire_and_exit_0(
+        tmp_path: Path, signum: signal.Signals) -> None:
+    """A closed SSH session (SIGHUP) or Ctrl-\\ (SIGQUIT) ended the process with the motors
+    still commanded; they act as SIGTERM does. The base's Sabertooth bus is real here
+    (`sim: false`) on a pty emulator, so the zeros are read off the wire."""
+    from firmware_like.pty_link import PtyLink
+    from firmware_like.sabertooth import SabertoothEmulator, SabertoothPtyDevice
+    from tests.harness import MARTE_YAML
+
+    link = PtyLink("base_motors", tmp_path)
+    emu = SabertoothEmulator((128, 129))
+    device = SabertoothPtyDevice(link, emu)
+    cfg = tmp_path / "bench.yaml"
+    cfg.write_text(MARTE_YAML.replace(
+        "base_motors: {driver: sabertooth, port: /dev/ttyUSB0, baud: 9600, timeout: 0.5}",
+        f"base_motors: {{driver: sabertooth, port: {link.path}, baud: 9600, sim: false}}"))
+    proc, host, port = start(["--sim", "--config", str(cfg), "--host", "127.0.0.1",
+                              "--port", "0"], env={"TMPDIR": str(tmp_path)})
+    try:
+        with socket.create_connection((host, port), timeout=5) as s:
+            assert ask(s, "base:base.drive=(50,0)") == ""
+            for _ in range(10):
+                device.service(time.monotonic())
+                time.sleep(0.01)
+            assert emu.duty(128, 1) > 0.3
+            proc.send_signal(signum)
+            _, err = proc.communicate(timeout=10)
+        device.service(time.monotonic())
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+        link.close()
+    assert proc.returncode == 0, err
+    assert f"{signal.Signals(signum).name} received: stopping every motor" in err
+    assert "stopped: every motor commanded to zero" in err
+    assert all(emu.duty(a, m) == 0.0 for a in (128, 129) for m in (1, 2))
+    assert not emu.timed_out(128)  # the supervisor stopped them, not their own timeout
+
+
+def test_a_sim_bus_without_sim_is_a_config_error_not_a_traceback(tmp_path: Path) -> None:
+    """`driver: sim` passes `ramp check` (the file may be meant for --sim); `ramp run`
+    without --sim used to build the bus outside any error handling and exit 1 with a
+    traceback."""
+    cfg = tmp_path / "sim.yaml"
+    cfg.write_text("server: {host: 127.0.0.1, port: 0}\nbuses:\n  io: {driver: sim}\n"
+                   "modules:\n  demo: {motor: {bus: io}, lamp: {bus: io}}\n")
+    check = subprocess.run([sys.executable, "-m", "ramp.cli", "check", str(cfg)], cwd=REPO,
+                           text=True, capture_output=True, timeout=30)
+    assert check.returncode == 0
+    proc = subprocess.run([sys.executable, "-m", "ramp.cli", "run", "--config", str(cfg)],
+                          cwd=REPO, text=True, capture_output=True, timeout=30)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.startswith(f"{cfg}:3: buses.io.driver: the sim driver stands in for "
+                                  "hardware only under `ramp run --sim`")
+    assert "Traceback" not in proc.stderr

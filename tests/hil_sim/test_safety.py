@@ -116,3 +116,66 @@ def test_sigkill_leaves_the_motors_stopped_by_the_controller_timeout(tmp_path: P
     # plus scheduling slack for a busy test machine
     assert stopped_at - killed <= 0.5 + 0.25
     assert emu.timed_out(128) and emu.timed_out(129)
+
+
+class StuckInsideBus(SimBus):
+    """A sim bus whose driver hangs for a while inside `tick` (a pyserial write that
+    blocks, say); it records any `stop_motors` that reaches the driver meanwhile."""
+
+    def __init__(self, name: str, params: dict[str, object], world: FakeWorld) -> None:
+        super().__init__(name, params, world=world)
+        self.hang_once = False
+        self.inside = False
+        self.entered_while_inside: list[str] = []
+
+    def _tick(self, now: float, dt: float) -> None:
+        if self.hang_once:
+            self.hang_once = False
+            self.inside = True
+            time.sleep(0.4)  # the loop is stuck inside this driver, on purpose
+            self.inside = False
+        super()._tick(now, dt)
+
+    def _stop_motors(self) -> None:
+        if self.inside:
+            self.entered_while_inside.append(threading.current_thread().name)
+        super()._stop_motors()
+
+
+def test_the_stall_guard_never_writes_through_a_driver_the_loop_is_inside(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """The guard used to call every driver from its thread with no lock, while the loop
+    could be inside the same pyserial object. Now it waits a moment for each bus's lock,
+    stops the others, and leaves the stuck one to its controller's own timeout."""
+    world = RecordingWorld()
+    buses: dict[str, SimBus] = {}
+
+    def factory(bc: object) -> SimBus:
+        name = bc.name  # type: ignore[attr-defined]
+        bus = (StuckInsideBus(name, {}, world) if name == "io"
+               else SimBus(name, {}, world=world))
+        buses[name] = bus
+        return bus
+
+    sup = Supervisor(config_from(DEMO_YAML), MonotonicClock(), bus_factory=factory,
+                     host="127.0.0.1", port=0)
+    sup.start()
+    guard = StallGuard(sup, limit=0.1)
+    guard.start()
+    stuck = buses["io"]
+    assert isinstance(stuck, StuckInsideBus)
+    try:
+        sup.slots["demo"].module._vel(50)
+        sup.slots["arm"].module._vel(50)
+        sup.scheduler.run_for(0.1)
+        stuck.hang_once = True
+        with caplog.at_level(logging.ERROR):
+            sup.scheduler.run_for(0.7)
+    finally:
+        guard.stop()
+    assert stuck.entered_while_inside == []
+    assert ("arm.motor", 0.0, "ramp-stall-guard") in world.history  # the free bus stopped
+    assert "bus io: the tick loop is stuck inside its driver" in caplog.text
+    assert world.motors["demo.motor"] == 0.0  # the loop stopped it when it came back
+    assert sup.watchdog.state == "tripped"
+    sup.shutdown()

@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import re
 import select
+import signal
 import socket
 import subprocess
 import sys
@@ -278,3 +279,34 @@ def test_c_hold_keeps_motion_past_the_watchdog_then_stops(server: str) -> None:
     after = ask(server, "base:base.get=()robot:robot.get=()")
     assert "base:lf_wheel.vel=(0)" in after
     assert "robot:watchdog.state=(idle)" in after
+
+
+@pytest.mark.timeout(60)
+def test_c_hold_exits_1_when_the_watchdog_trips_during_the_hold() -> None:
+    """The supervisor is frozen for 0.6 s in the middle of a hold: when it runs again it
+    stops every module and the watchdog reads `tripped`. The hold used to go on and exit 0."""
+    srv = Server()
+    try:
+        proc = subprocess.Popen([*SHELL, srv.address, "-c", "hold base:base.drive=(30,0) 20"],
+                                cwd=REPO, text=True, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE)
+        try:
+            assert proc.stdout is not None
+            r, _, _ = select.select([proc.stdout], [], [], 10)
+            assert r and proc.stdout.readline().startswith("holding base:base.drive=(30,0)")
+            time.sleep(0.3)
+            srv.proc.send_signal(signal.SIGSTOP)
+            time.sleep(0.6)
+            srv.proc.send_signal(signal.SIGCONT)
+            out, err = proc.communicate(timeout=10)  # long before the 20 s are up
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate()
+        assert proc.returncode == 1, (out, err)
+        assert "the watchdog tripped during the hold" in out
+        assert "stopped: base:base.stop=()" in out
+        assert "base:lf_wheel.vel=(0)" in ask(srv.address, "base:base.get=()")
+    finally:
+        srv.proc.send_signal(signal.SIGCONT)
+        srv.close()

@@ -424,3 +424,20 @@ def test_configuration_is_checked() -> None:
         bus.channel("motor", "b", {"node_id": 3})
     with pytest.raises(ValueError, match="ODrive node id"):
         bus.channel("motor", "c", {"node_id": 64})
+
+
+def test_the_emulator_keeps_a_bounded_log_of_received_frames(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """It grew by 4,800 frames per simulated minute, for ever; now it keeps the newest."""
+    import firmware_like.odrive
+
+    monkeypatch.setattr(firmware_like.odrive, "RX_LOG_FRAMES", 100)
+    r = Rig()
+    try:
+        r.start()
+        r.motors["base.lf_wheel"].set_duty(0.3)
+        r.run(2.0)  # about 160 Set_Input_Vel refreshes
+        assert len(r.emu.rx_log) == 100
+        assert r.emu.rx_log[-1][0] == pytest.approx(r.now)  # the newest are kept
+    finally:
+        r.close()

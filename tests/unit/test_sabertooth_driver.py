@@ -376,6 +376,33 @@ def test_short_writes_never_split_a_packet(rig: Rig, monkeypatch: pytest.MonkeyP
     assert all(rig.emu.duty(a, m) == 0.0 for a, m in WIRING.values())
 
 
+def test_a_stop_finishes_a_half_written_motor_packet_as_speed_zero(
+        rig: Rig, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The OS took two bytes of a 70 % packet when the motors must stop (a stall, SIGTERM):
+    the packet is completed as speed 0, so nothing queued before the stop moves a motor."""
+    real_write = rig.bus._ser.write
+    allowed: dict[str, int | None] = {"bytes": 2}
+
+    def stingy(data: bytes) -> int:
+        n = allowed["bytes"]
+        if n is None:
+            return int(real_write(data))
+        allowed["bytes"] = 0
+        return int(real_write(data[:n])) if n else 0
+
+    monkeypatch.setattr(rig.bus._ser, "write", stingy)
+    before = len(rig.emu.packets)
+    rig.ch["lf"].set_duty(0.7)
+    assert rig.bus.stats["short_writes"] == 1
+    allowed["bytes"] = None
+    rig.bus.stop_motors()
+    rig.sync()
+    after = [p for p in list(rig.emu.packets)[before:] if p[2] in (0, 1, 4, 5)]
+    assert after and all(data == 0 for _, _, _, data in after), after
+    assert rig.emu.counters["bad_checksum"] == 0
+    assert all(rig.emu.duty(a, m) == 0.0 for a, m in WIRING.values())
+
+
 def test_full_os_buffer_never_blocks_and_loses_nothing(tmp_path: Path) -> None:
     """Nobody reads the pty for a while at 115200 baud: the driver must hold back, not block,
     and what it wrote must still be whole packets once the reader comes back."""

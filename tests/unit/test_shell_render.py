@@ -311,7 +311,10 @@ class ScriptedRobot:
         self.modules = "base"  # robot.modules only those in state ok
         self.base_fault = False
         self.watchdog_timeout = "1.0"
+        #: robot.get says `tripped` once this is true of the log (else `armed`)
+        self.trip_when: Callable[[list[tuple[int, str]]], bool] = lambda log: False
         self.interrupt_when: Callable[[list[tuple[int, str]]], bool] = lambda log: False
+        self._interrupted = False  # Ctrl-C once: a second one would hit a later test
         self._conns: list[socket.socket] = []
         threading.Thread(target=self._accept, daemon=True).start()
 
@@ -341,10 +344,8 @@ class ScriptedRobot:
                     text = line.decode()
                     self.log.append((index, text))
                     conn.sendall(self.answer(text).encode() + b"\n")
-                    if self.interrupt_when(self.log):
-                        # One Ctrl-C only: the condition stays true for later lines, and a
-                        # second signal would land after the shell's handler is gone.
-                        self.interrupt_when = lambda log: False
+                    if not self._interrupted and self.interrupt_when(self.log):
+                        self._interrupted = True
                         signal.pthread_kill(threading.main_thread().ident or 0, signal.SIGINT)
 
     def answer(self, text: str) -> str:
@@ -363,7 +364,9 @@ class ScriptedRobot:
             elif key == "robot:robot.modules":
                 out.append(f"robot:robot.modules=({self.modules})")
             elif key == "robot:robot.get":
-                out.append(f"robot:watchdog.timeout=({self.watchdog_timeout})")
+                state = "tripped" if self.trip_when(self.log) else "armed"
+                out.append(f"robot:watchdog.timeout=({self.watchdog_timeout})"
+                           f"robot:watchdog.state=({state})")
             elif key == "base:base.get":
                 out.append("base:battery.volt=(12.5)")
         return "".join(out)
@@ -421,6 +424,21 @@ def test_hold_feeds_on_the_main_connection_then_stops(robot: ScriptedRobot) -> N
         shell.close()
     assert robot.lines_of(0) == ["base:base.drive=(30,0)", "", "", "", "base:base.stop=()"]
     assert "stopped: base:base.stop=()" in out.getvalue()
+
+
+def test_hold_ends_early_and_exits_1_when_the_watchdog_trips(robot: ScriptedRobot) -> None:
+    """The robot stopped the motion under the hold (a stall, a lost feed): the shell says so
+    and exits 1 instead of holding on and reporting success."""
+    robot.watchdog_timeout = "0.08"  # heartbeats every 20 ms
+    robot.trip_when = lambda log: sum(t == "" for i, t in log if i == 0) >= 2
+    shell, out = connected(robot)
+    try:
+        assert shell.run_line("hold base:base.drive=(30,0) 30") == 1
+    finally:
+        shell.close()
+    assert robot.lines_of(0) == ["base:base.drive=(30,0)", "", "", "base:base.stop=()"]
+    assert "robot:robot.get=()" in robot.lines_of(1)  # the state is read on the other one
+    assert "the watchdog tripped during the hold" in out.getvalue()
 
 
 def test_a_change_in_attached_modules_re_describes(robot: ScriptedRobot) -> None:

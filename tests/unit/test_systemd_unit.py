@@ -68,6 +68,7 @@ def one(unit: dict[str, dict[str, list[str]]], section: str, key: str) -> str:
     ("CPUSchedulingPolicy", "fifo"),
     ("CPUSchedulingPriority", "20"),
     ("LimitRTPRIO", "20"),
+    ("LimitNOFILE", "8192"),
 ])
 def test_service_key(unit: dict[str, dict[str, list[str]]], key: str, value: str) -> None:
     assert one(unit, "Service", key) == value
