@@ -180,3 +180,15 @@ def test_attitude_at_a_past_time_comes_from_the_history() -> None:
     past = bench.ahrs.attitude_at(5.0)[1]
     assert math.degrees(past) == pytest.approx(1.0, abs=0.15)  # pitch was 1 deg at t = 5
     assert bench.ahrs.attitude_at(-1.0) == bench.ahrs.attitude_at(0.0)
+
+
+def test_a_fix_from_the_scan_while_parked_is_not_taken_for_the_imu_moving() -> None:
+    roll, pitch = math.radians(1.0), math.radians(2.0)
+    bench = Bench(lambda t: (roll, pitch, 0.0), seed=2, fault="imu-shift",
+                  shift_window=(0.5, 0.6))  # shifted before the AHRS had a reference
+    bench.run(3.0)
+    assert bench.tilt_error_deg() > 4.0 and not bench.ahrs.suspect
+    bench.ahrs.level_hint(roll, pitch, 1.0)
+    bench.run(5.0)
+    assert bench.ahrs.suspect and bench.tilt_error_deg() < 0.3
+    assert bench.ahrs.correction_deg == pytest.approx(bench.emulator.shift_deg, abs=0.3)

@@ -258,6 +258,7 @@ class Ahrs:
         rr, pp = own[0] + w * (roll - own[0]), own[1] + w * (pitch - own[1])
         self._q = quat_from_euler(rr + (r - own[0]), pp + (p - own[1]), y)
         self._reset_history()
+        self._parked_ref = None  # the jump just made is the fix, not the IMU moving
 
     # -- the task ------------------------------------------------------------------------------
     def tick(self, now: float, dt: float) -> None:
