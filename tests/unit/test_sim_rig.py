@@ -185,3 +185,16 @@ def test_with_the_backend_attached_a_drive_sent_over_mcp_moves_the_world_the_lid
         assert rig.ahrs.settled and not rig.ahrs.suspect
         link.stop()
     assert backend.closed
+
+
+def test_scans_on_demand_come_one_per_request() -> None:
+    world = MarteWorld.seeded(4)
+    with Rig(world, seed=4, stream=False) as rig:
+        assert rig.run_until(lambda: rig.perception.ready, 5.0)
+        assert rig.lidar.state == "ready"
+        before = len(rig.scans.records)
+        rig.run_for(0.5)
+        assert len(rig.scans.records) == before  # nothing unasked for
+        assert rig.lidar.request_scan()
+        rig.run_for(0.1)
+        assert len(rig.scans.records) == before + 1

@@ -26,7 +26,7 @@ from collections.abc import Callable
 
 from ramp.autonomy.hal.interfaces import PanTilt
 from ramp.autonomy.hal.lidar import Lidar, Scan
-from ramp.autonomy.mount import Mount, Vec3, lidar_pose
+from ramp.autonomy.mount import Mat3, Mount, Vec3, lidar_pose
 from ramp.autonomy.perception.ahrs import Ahrs
 from ramp.autonomy.perception.records import ScanRecord
 
@@ -57,6 +57,7 @@ class ScanCollector:
         self._angles: deque[tuple[float, float]] = deque()
         self._offset: float | None = None  # host time - sensor time, smallest seen
         self._last_sensor_time = float("-inf")
+        self._pose_for: tuple[tuple[float, float], tuple[Vec3, Mat3]] | None = None
         lidar.add_listener(self._on_scan)
 
     def add_listener(self, fn: RecordListener) -> None:
@@ -127,7 +128,9 @@ class ScanCollector:
             self.skipped += 1
             return
         pan, tilt = angles
-        position, rotation = lidar_pose(self.lidar_mount, self.pivot, pan, tilt)
+        if self._pose_for is None or self._pose_for[0] != angles:  # the gimbal moved
+            self._pose_for = (angles, lidar_pose(self.lidar_mount, self.pivot, pan, tilt))
+        position, rotation = self._pose_for[1]
         roll, pitch, yaw = self.ahrs.attitude_at(t)
         record = ScanRecord(t=t, ranges=scan.ranges, angles=scan.angles,
                             lidar_position=position, lidar_rotation=rotation, roll=roll,
