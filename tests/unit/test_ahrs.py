@@ -120,6 +120,16 @@ def test_the_localizers_yaw_holds_the_yaw_and_teaches_the_yaw_rate_bias() -> Non
     assert math.degrees(bench.ahrs.gyro_bias[2]) == pytest.approx(drift_z, abs=0.03)
 
 
+def test_the_first_yaw_fix_is_taken_whole_and_later_ones_by_their_weight() -> None:
+    bench = Bench(lambda t: (0.0, 0.0, 1.0))
+    bench.run(1.0)
+    assert not bench.ahrs.yaw_known
+    bench.ahrs.correct_yaw(1.0, 0.3)
+    assert bench.ahrs.yaw_known and bench.ahrs.yaw == pytest.approx(1.0, abs=1e-9)
+    bench.ahrs.correct_yaw(1.2, 0.5)
+    assert bench.ahrs.yaw == pytest.approx(1.1, abs=1e-9)
+
+
 def test_standing_still_measures_the_gyro_bias_so_yaw_does_not_wander() -> None:
     bench = Bench(lambda t: (0.01, -0.02, 0.5), seed=7)
     bench.run(2.5)

@@ -221,9 +221,13 @@ class Ahrs:
 
     def correct_yaw(self, yaw: float, weight: float) -> None:
         """The localizer's yaw (rad) with a confidence `weight` in 0..1: move toward it by
-        that share, and learn the yaw-rate bias the error reveals."""
+        that share, and learn the yaw-rate bias the error reveals. While no yaw is known yet
+        (started with a start-box hint only), the first one is taken whole."""
         w = max(0.0, min(1.0, weight))
         if w == 0.0:
+            return
+        if not self.yaw_known:  # nothing to blend with: the first fix is the heading
+            self.reset_yaw(yaw)
             return
         err = math.remainder(yaw - self.yaw, 2 * math.pi)
         self._turn_yaw(w * err)
