@@ -69,12 +69,11 @@ def add_perceive_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]
                     "drivers on the emulators, on a virtual clock. Prints the estimated pose "
                     "with its confidence and the obstacles found.")
     where = p.add_argument_group("world (the SPEC 6.1 arena)")
-    choice = where.add_mutually_exclusive_group()
-    choice.add_argument("--world", metavar="FILE",
-                        help="world file (YAML: start, rocks, craters)")
-    choice.add_argument("--seed", type=int, metavar="N",
-                        help="seed of the layout (default 0); with --world it is 0 and seeds "
-                             "only the noise")
+    where.add_argument("--world", metavar="FILE",
+                       help="world file (YAML: start, rocks, craters); default: a seeded layout")
+    where.add_argument("--seed", type=int, default=0, metavar="N",
+                       help="seed of the layout (without --world), of the ground's "
+                            "undulation, the sensors' noise and the IMU's fault (default 0)")
     p.add_argument("--at", required=True, metavar="X,Y,YAW",
                    help="robot pose: footprint centre in metres, yaw in degrees "
                         "counter-clockwise from +x (e.g. 0.8,2.9,0)")
@@ -275,7 +274,7 @@ def _perceive(args: argparse.Namespace) -> int:
         print(f"ramp sim perceive: needs the autonomy package: {exc}", file=sys.stderr)
         return 1
     x, y, yaw = parse_pose(args.at)
-    seed = 0 if args.seed is None else args.seed
+    seed = args.seed
     if args.world:
         try:
             layout = load_world(args.world)
