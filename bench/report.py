@@ -196,6 +196,17 @@ def render(doc: dict[str, Any]) -> str:
                 f"{_num(pl['astar_expanded']['p50'])} cells at p50 "
                 f"(max {_num(pl['astar_expanded']['max'])}); grid build p50 "
                 f"{_num(pl['grid_build_ms']['p50'])} ms.", ""]
+    r = doc.get("rig")
+    if r and "error" not in r:
+        out += [f"**rig** (the simulation rig, {r['simulated_s']:g} simulated s of a robot "
+                "driving a weave; baseline: `world.step` alone on the same script)", "", HEAD]
+        for key, label in (("sensors", "world + emulators + drivers + perception, 40 scans/s"),
+                           ("sensors_scans_on_demand", "the same, scans on demand 4/s"),
+                           ("with_backend", "streaming, with the backend over MCP")):
+            out += [_row(f"{label}: real-time factor", r[key]["real_time_factor"], "x"),
+                    _row(f"{label}: CPU s per simulated minute",
+                         r[key]["cpu_s_per_simulated_minute"], " s")]
+        out.append("")
     return "\n".join(out)
 
 

@@ -1,6 +1,6 @@
 """Every number of the arena world and the LIDAR's view of it, each with where it comes from.
 
-Sources as in `marte_params.py`: "SPEC" is /work/shared/SPEC.md (section 6.1 defines the
+Sources as in `marte_params.py`: "SPEC" is ../shared/SPEC.md (section 6.1 defines the
 arena, its obstacles and the referee; 6.2 the sensors); "thesis p.N" is a page of the thesis;
 "UTM-30LX-EW sheet" is Hokuyo's specification sheet of the scanner. Anything else is marked
 ASSUMPTION with the reason for the value chosen. The arena's length, width, regions and

@@ -89,6 +89,13 @@ MISSION_FIELDS: dict[str, Field] = {
     "end_margin_s": Field(float, 30.0, lo=0.0, hi=3600.0,
                           what="seconds before the end when no new cycle starts"),
     "max_relocalize_tries": Field(int, 3, lo=0, hi=100, what="a number of tries"),
+    # Perception (issue "Perception"): one localization's scans, the 3D scan's sweep.
+    "localize_scans": Field(int, 10, lo=1, hi=400, what="a number of scans"),
+    "sweep_start_deg": Field(float, 0.0, lo=-30.0, hi=80.0,
+                             what="a tilt below the horizon in degrees"),
+    "sweep_end_deg": Field(float, 40.0, lo=-30.0, hi=80.0,
+                           what="a tilt below the horizon in degrees"),
+    "sweep_speed_dps": Field(float, 5.0, lo=0.5, hi=90.0, what="a tilt speed in deg/s"),
 }
 
 TOP_KEYS = ("backend", "lidar", "imu", "gimbal", "mission")

@@ -6,7 +6,13 @@ Nothing heavy is imported until a subcommand runs (numpy, the emulators, matplot
 `ramp run` and `ramp check` start as fast as before.
 
     ramp sim lidar (--world FILE | --seed N) --at X,Y,YAW [--tilt DEG] [--pan DEG]
-                   [--plot FILE.png] [--json]
+                   [--via-scip] [--plot FILE.png] [--json]
+    ramp sim perceive [--world FILE | --seed N] --at X,Y,YAW [--hint left|right]
+                      [--fault none|gyro-drift|imu-shift] [--config FILE] [--json]
+                      [--plot FILE.png]
+
+`ramp sim perceive` needs the autonomy package (`ramp/autonomy/`); it is imported only when
+that subcommand runs, so the others work without it.
 
 Exit status: 0 done, 2 usage or world-file error (each error on stderr as
 `file:line: key.path: what was expected`).
@@ -44,6 +50,10 @@ def add_lidar_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
                    help="gimbal tilt, positive tips the scan plane down (default 0)")
     p.add_argument("--pan", type=float, default=0.0, metavar="DEG",
                    help="gimbal pan, counter-clockwise positive (default 0)")
+    p.add_argument("--via-scip", action="store_true",
+                   help="take the scan through the real path: the Hokuyo emulator serving "
+                        "SCIP 2.0 on loopback TCP to the autonomy's LIDAR driver (needs the "
+                        "autonomy package); the ranges are the same")
     p.add_argument("--plot", metavar="FILE.png", help="draw the scan over the arena map")
     p.add_argument("--json", action="store_true",
                    help="print one JSON object (the pose, the counts, every range in mm)")
@@ -56,11 +66,44 @@ def add_campaign_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]
     add_parser(sub)
 
 
+def add_perceive_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "perceive", help="localize and detect obstacles from one pose, on the emulated sensors",
+        description="Place the robot, let the AHRS settle and the gimbal level the LIDAR, "
+                    "localize from level scans (re-levelling from the scan when lost), sweep "
+                    "the LIDAR's tilt for a 3D scan and detect rocks and craters: the real "
+                    "drivers on the emulators, on a virtual clock. Prints the estimated pose "
+                    "with its confidence and the obstacles found.")
+    where = p.add_argument_group("world (the SPEC 6.1 arena)")
+    where.add_argument("--world", metavar="FILE",
+                       help="world file (YAML: start, rocks, craters); default: a seeded layout")
+    where.add_argument("--seed", type=int, default=0, metavar="N",
+                       help="seed of the layout (without --world), of the ground's "
+                            "undulation, the sensors' noise and the IMU's fault (default 0)")
+    p.add_argument("--at", required=True, metavar="X,Y,YAW",
+                   help="robot pose: footprint centre in metres, yaw in degrees "
+                        "counter-clockwise from +x (e.g. 0.8,2.9,0)")
+    p.add_argument("--hint", choices=("left", "right"),
+                   help="the start box the robot is known to be in (initial localization); "
+                        "without it the AHRS starts within 20 deg of the true yaw")
+    p.add_argument("--fault", choices=("none", "gyro-drift", "imu-shift"), default="none",
+                   help="IMU fault to inject (SPEC 6.2; default none)")
+    p.add_argument("--config", metavar="FILE",
+                   help="the autonomy's config (default: the repository's autonomy.yaml)")
+    p.add_argument("--plot", metavar="FILE.png",
+                   help="draw the localization and the obstacle map")
+    p.add_argument("--json", action="store_true",
+                   help="print one JSON object: pose (or null when lost), lost, obstacles, "
+                        "true_pose and the details")
+    p.set_defaults(func=cmd_perceive)
+
+
 #: Every `ramp sim` subcommand: name -> function adding its parser.
 SIM_COMMANDS: dict[str, Callable[[argparse._SubParsersAction[argparse.ArgumentParser]],
                                  None]] = {
     "lidar": add_lidar_parser,
     "campaign": add_campaign_parser,
+    "perceive": add_perceive_parser,
 }
 
 
@@ -121,6 +164,8 @@ def _lidar(args: argparse.Namespace) -> int:
     view = LidarView.of(world)
     pan, tilt = math.radians(args.pan), math.radians(args.tilt)
     scan = view.scan(view.pose_of_world(pan, tilt))
+    if args.via_scip:
+        scan = _through_scip(world, scan, pan, tilt)
     counts = {name: int((scan.kinds == k).sum()) for k, name in enumerate(HIT_NAMES)}
     if args.plot:
         try:
@@ -140,6 +185,7 @@ def _lidar(args: argparse.Namespace) -> int:
             "rocks": [vars(r) for r in layout.rocks],
             "craters": [vars(c) for c in layout.craters],
             "hits": counts, "rule_notes": notes, "plot": args.plot,
+            "via_scip": bool(args.via_scip),
             "ranges_mm": [int(v) for v in scan.mm],
         }
         print(json.dumps(doc))
@@ -156,3 +202,157 @@ def _lidar(args: argparse.Namespace) -> int:
     if args.plot:
         print(f"  plot written to {args.plot}")
     return 0
+
+
+def _through_scip(world: Any, direct: Any, pan: float, tilt: float) -> Any:
+    """The same scan, taken by the autonomy's Hokuyo driver from the emulator over TCP.
+
+    A fresh view with the same seed draws the same noise, so the emulator's first scan is
+    `direct`'s; the driver's ranges replace the direct ones (a mismatch is an error: the
+    bytes lost something)."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from firmware_like.hokuyo import HokuyoEmulator
+    from firmware_like.lidar_view import LidarView
+    from ramp.clock import VirtualClock
+    from ramp.scheduler import Scheduler
+
+    try:
+        from ramp.autonomy.hal.hokuyo import HokuyoLidar
+    except ImportError as exc:
+        raise UsageError("--via-scip needs the autonomy package (ramp/autonomy)") from exc
+    view = LidarView.of(world)
+    pose = view.pose_of_world(pan, tilt)
+    clock = VirtualClock()
+    loop = Scheduler(clock, 100.0)
+    emulator = HokuyoEmulator(clock, lambda t: view.scan(pose).mm, port=0)
+    emulator.attach(loop)
+    lidar = HokuyoLidar(emulator.url, clock=clock, loop=loop)
+    loop.add_task("emulator", 100.0, lambda now, dt: emulator.service(now))
+    loop.add_task("lidar", 100.0, lidar.tick)
+    try:
+        lidar.start()
+        asked = False
+
+        def got() -> bool:
+            nonlocal asked
+            if not asked:
+                asked = lidar.request_scan()
+            return lidar.latest is not None
+
+        end = clock.now() + 3.0
+        loop.run(lambda: got() or clock.now() >= end)
+        scan = lidar.latest
+        if scan is None:
+            raise UsageError(f"--via-scip: no scan from the emulator ({lidar.state}: "
+                             f"{lidar.fault})")
+    finally:
+        lidar.stop()
+        emulator.close()
+    mm = np.asarray(scan.raw, dtype=np.int64)
+    if not np.array_equal(mm, direct.mm):
+        raise RuntimeError("the scan read over SCIP differs from the one the emulator cast")
+    return replace(direct, mm=mm, ranges=np.where(scan.valid, scan.ranges, np.nan))
+
+
+def cmd_perceive(args: argparse.Namespace) -> int:
+    try:
+        return _perceive(args)
+    except UsageError as exc:
+        print(f"ramp sim perceive: {exc}", file=sys.stderr)
+        return 2
+
+
+def _perceive(args: argparse.Namespace) -> int:
+    import logging
+
+    from firmware_like.arena import random_layout
+    from firmware_like.marte import MarteWorld
+    from firmware_like.world_file import WorldFileError, load_world
+
+    try:
+        from ramp.autonomy.perception.pipeline import PerceptionUnavailable
+        from ramp.errors import ConfigErrors
+        from ramp.simulation.perceive import PerceiveError, perceive
+        from ramp.simulation.rig import load_autonomy_config
+    except ImportError as exc:
+        print(f"ramp sim perceive: needs the autonomy package: {exc}", file=sys.stderr)
+        return 1
+    x, y, yaw = parse_pose(args.at)
+    seed = args.seed
+    if args.world:
+        try:
+            layout = load_world(args.world)
+        except WorldFileError as exc:
+            for err in exc.errors:
+                print(err, file=sys.stderr)
+            return 2
+    else:
+        layout = random_layout(seed)
+    try:
+        config = load_autonomy_config(args.config)
+    except ConfigErrors as exc:
+        for problem in exc.errors:
+            print(problem, file=sys.stderr)
+        return 2
+    world = MarteWorld(seed=seed, layout=layout)
+    try:
+        world.place(x, y, yaw)
+    except ValueError as exc:
+        raise UsageError(f"--at: {exc}") from exc
+    logging.basicConfig(level=logging.ERROR, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        result = perceive(world, config, seed=seed, fault=args.fault, hint=args.hint)
+    except (PerceptionUnavailable, PerceiveError) as exc:
+        print(f"ramp sim perceive: {exc}", file=sys.stderr)
+        return 1
+    if args.plot:
+        try:
+            from ramp.simulation.perceive_plot import draw_perception
+        except ImportError as exc:
+            raise UsageError("--plot needs matplotlib: pip install 'ramp[plot]'") from exc
+        draw_perception(world, result, args.plot, title=(
+            f"{layout.source}, seed {seed}: robot at x {x:g} y {y:g} yaw {yaw:g}°, "
+            f"hint {args.hint or 'none'}, fault {args.fault}"))
+    doc = result.to_json(world=layout.source, seed=seed, fault=args.fault, hint=args.hint,
+                         plot=args.plot)
+    if args.json:
+        print(json.dumps(doc))
+        return 0
+    for line in describe_perception(doc):
+        print(line)
+    return 0
+
+
+def describe_perception(doc: dict[str, Any]) -> list[str]:
+    """The result in a few lines a person reads."""
+    def pose(p: dict[str, Any]) -> str:
+        return f"x {p['x']:.3f} y {p['y']:.3f} yaw {p['yaw']:.1f} deg"
+
+    out = [f"{doc['world']}: seed {doc['seed']}, fault {doc['fault']}, "
+           f"hint {doc['hint'] or 'none'}"]
+    out.append(f"  true pose:      {pose(doc['true_pose'])}")
+    if doc["lost"] or doc["pose"] is None:
+        out.append(f"  estimated pose: LOST ({doc['reason'] or 'no reason given'})")
+    else:
+        out.append(f"  estimated pose: {pose(doc['pose'])} (confidence "
+                   f"{doc['pose']['confidence']:.2f})")
+    if len(doc["candidates"]) > 1:
+        out.append("  candidates:     " + "; ".join(pose(c) for c in doc["candidates"]))
+    if doc["relevels"]:
+        out.append(f"  re-levelled {doc['relevels']} time(s) from the scan")
+    if doc["imu"]["suspect"]:
+        out.append(f"  IMU suspect: {doc['imu']['reason']}")
+    out.append(f"  obstacles ({len(doc['obstacles'])} detected, "
+               f"{len(doc['true_obstacles'])} in the world):")
+    for o in doc["obstacles"]:
+        out.append(f"    {o['kind']:6s} at x {o['x']:.2f} y {o['y']:.2f}, d {o['d']:.2f} m")
+    if doc["sweep_note"]:
+        out.append(f"  sweep: {doc['sweep_note']}")
+    out.append(f"  {doc['scans']} level scans, {doc['sweep_scans']} sweep scans; "
+               f"{doc['sim_time_s']:.1f} s simulated in {doc['wall_time_s']:.1f} s")
+    if doc.get("plot"):
+        out.append(f"  plot written to {doc['plot']}")
+    return out

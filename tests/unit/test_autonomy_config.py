@@ -41,7 +41,7 @@ def test_the_example_for_marte_loads() -> None:
     g = cfg.gimbal
     assert (g.pan.channel, g.tilt.channel) == (0, 1) and g.tilt.reversed
     assert (g.tilt.min_deg, g.tilt.max_deg) == (-30.0, 45.0)
-    assert g.pivot == (0.45, 0.0, 0.55)
+    assert g.pivot == (0.40, 0.0, 0.70)
     assert cfg.mission["duration_s"] == 600.0 and cfg.mission["max_relocalize_tries"] == 3
 
 

@@ -73,3 +73,14 @@ def test_a_world_file_that_departs_from_the_rules_is_used_with_a_note(
     practice = str(REPO / "examples" / "worlds" / "practice-field.yaml")
     assert main(["sim", "lidar", "--world", practice, "--at", "1.0,1.94,0"]) == 0
     assert "note: departs from the competition rules" in capsys.readouterr().out
+
+
+def test_via_scip_the_driver_reads_the_very_same_scan_over_tcp(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    args = ["sim", "lidar", "--seed", "4", "--at", "1.2,1.0,30", "--tilt", "15", "--json"]
+    assert main(args) == 0
+    direct = json.loads(capsys.readouterr().out.splitlines()[-1])
+    assert main([*args, "--via-scip"]) == 0
+    via = json.loads(capsys.readouterr().out.splitlines()[-1])
+    assert via["via_scip"] is True and direct["via_scip"] is False
+    assert via["ranges_mm"] == direct["ranges_mm"] and via["hits"] == direct["hits"]

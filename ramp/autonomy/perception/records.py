@@ -29,7 +29,7 @@ FloatArray = npt.NDArray[np.float64]
 class ScanRecord:
     """One scan and the estimates it was taken under."""
 
-    t: float  # host clock (the injected one) when the scan arrived, s
+    t: float  # host clock (the injected one) when the beam ahead was measured, s
     ranges: FloatArray  # (n,) metres, NaN where the sensor saw nothing usable
     angles: FloatArray  # (n,) radians, counter-clockwise from the LIDAR's forward axis
     lidar_position: Vec3  # LIDAR optical centre in the chassis frame, m
