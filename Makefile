@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: run teleop test lint bench bench-quick fuzz soak clean
+.PHONY: run teleop screenshots test lint bench bench-quick fuzz soak clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -43,3 +43,7 @@ fuzz: $(STAMP)
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis
+
+# Refresh the README's console screenshot: the browser tests take it (docs/img/teleop.png).
+screenshots: $(STAMP)
+	RAMP_UPDATE_DOCS=1 $(PY) -m pytest -q tests/hil_sim/test_teleop_browser.py
