@@ -39,6 +39,7 @@ from tests.obstacle_scenes import match, scan_world
 
 _COUNTS = {"full": (12, 5), "quick": (4, 3), "smoke": (1, 1)}  # layouts, repeats
 _BANDS = ((0.0, 1.0), (1.0, 2.0), (2.0, 3.0), (3.0, 4.0))
+X, Y, YAW = 0.9, 1.94, 0.0  # the robot at the start region's front edge, facing +x
 
 
 def _timed(fn: Callable[[], Any], repeats: int) -> list[float]:
@@ -66,15 +67,14 @@ def run(settings: Settings, workdir: Path) -> dict[str, Any]:
     worst_pos = worst_d = 0.0
     bands: dict[str, list[tuple[float, float]]] = {f"{a:g}-{b:g} m": [] for a, b in _BANDS}
     for seed in range(layouts):
-        scene = scan_world(MarteWorld.seeded(seed), 0.9, 1.94, 0.0, seed=seed)
-        x, y, yaw = 0.9, 1.94, 0.0
+        scene = scan_world(MarteWorld.seeded(seed), X, Y, YAW, seed=seed)
         records = scene.records
-        cloud = merge(records, x, y, yaw)
+        cloud = merge(records, X, Y, YAW)
         points, scans, sweep_s = len(cloud), len(records), scene.plan.duration_s
         detect_obstacles(cloud)  # warm up
-        times["merge"] += _timed(lambda r=records: merge(r, x, y, yaw), repeats)
+        times["merge"] += _timed(lambda r=records: merge(r, X, Y, YAW), repeats)
         times["detect"] += _timed(lambda c=cloud: detect_obstacles(c), repeats)
-        times["both"] += _timed(lambda r=records: detect_obstacles(merge(r, x, y, yaw)),
+        times["both"] += _timed(lambda r=records: detect_obstacles(merge(r, X, Y, YAW)),
                                 repeats)
         times["lsq"] += _timed(lambda c=cloud: fit_plane_lsq(c.points), repeats)
         times["ransac"] += _timed(lambda c=cloud: fit_plane_ransac(c.points), repeats)

@@ -4,16 +4,20 @@ worked by hand."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from ramp.autonomy.config import load_config
 from ramp.autonomy.mount import IDENTITY, Mount, lidar_pose
 from ramp.autonomy.perception.cloud import (
     ground_ahead,
     merge,
     move_time,
     plan_sweep,
+    region_distances,
+    sweep_from_config,
     tilt_for,
 )
 from ramp.autonomy.perception.records import ScanRecord
@@ -22,6 +26,7 @@ SIM_MOUNT = Mount(0.40, 0.0, 0.70)  # firmware_like's scanner: on its tilt axis
 SIM_PIVOT = (0.40, 0.0, 0.70)
 YAML_MOUNT = Mount(0.45, 0.0, 0.61)  # autonomy.yaml: 6 cm above the tilt axis
 YAML_PIVOT = (0.45, 0.0, 0.55)
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_a_short_move_is_a_triangle_and_a_long_one_cruises() -> None:
@@ -149,3 +154,23 @@ def test_merging_nothing_gives_an_empty_cloud() -> None:
     blank = merge([ScanRecord(0.0, np.array([math.nan]), np.array([0.0]), (0.0, 0.0, 0.5),
                               IDENTITY, 0.0, 0.0)], 1.0, 1.0, 0.0)
     assert len(blank) == 0 and blank.origins.shape == (1, 3)
+
+
+def test_the_region_distances_cover_the_obstacle_region_and_a_margin_beyond() -> None:
+    assert region_distances(0.9) == pytest.approx((0.6, 4.44 + 0.3 - 0.9))
+    assert region_distances(2.3, far_margin_m=0.0) == pytest.approx((0.05, 4.44 - 2.3))
+    with pytest.raises(ValueError, match="nothing to scan"):
+        region_distances(5.0)
+
+
+def test_autonomy_yaml_gives_the_plan_its_mount_pivot_and_tilt_servo() -> None:
+    config = load_config(REPO / "autonomy.yaml")
+    plan = sweep_from_config(config, *region_distances(0.9))
+    tilt = config.gimbal.tilt
+    assert max(plan.tilts_deg) <= tilt.max_deg and min(plan.tilts_deg) >= tilt.min_deg
+    assert plan.blind_m == pytest.approx(ground_ahead(config.lidar.mount, config.gimbal.pivot,
+                                                      tilt.max_deg))
+    same = plan_sweep(config.lidar.mount, config.gimbal.pivot, near_m=0.6, far_m=4.74 - 0.9,
+                      tilt_min_deg=tilt.min_deg, tilt_max_deg=tilt.max_deg,
+                      velocity_dps=tilt.velocity_dps, acceleration_dps2=tilt.acceleration_dps2)
+    assert plan == same

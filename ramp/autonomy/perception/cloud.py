@@ -1,31 +1,44 @@
 """The 3D scan: a tilt sweep of the gimbal, and its 2D scans merged into one point cloud.
 
 The thesis' 3D scanner (5.3.4) "repeatedly increases the pitch on the gimbal and takes a 2D
-scan at each pre-defined angle". Here the pre-defined angles are planned, not guessed: a
-scan tilted nose-down by tau meets level ground along a line h / tan(tau) ahead of the
-LIDAR (h its height), perpendicular to the heading and across the whole 270 deg fan. The
-plan spaces those ground lines evenly, `spacing_m` apart, between a near and a far distance
-ahead of the robot, so that an obstacle gets the same number of lines across it wherever it
-stands. Far lines need fine tilt steps (at 3 m ahead, 0.1 deg moves the line by 2.4 cm);
-near ones coarse steps.
+scan at each pre-defined angle". Here the angles are planned: a scan tilted nose-down by tau
+meets level ground along a line h / tan(tau) ahead of the LIDAR (h its height), across the
+whole 270 deg fan and perpendicular to the pan direction. `plan_sweep` spaces those lines
+evenly, `spacing_m` apart, from `far_m` to `near_m` ahead of the footprint centre, so an
+obstacle gets the same number of lines across it wherever it stands. Far lines need fine
+steps (3 m ahead of a scanner 0.7 m up, 0.1 deg moves the line by 2.4 cm), near ones coarse.
 
-Stop-and-go, as the thesis did it: the gimbal moves to a tilt (a trapezoid at the servo's
+    plan = sweep_from_config(config, *region_distances(robot_x))   # robot facing +x
+    plan.tilts_deg, plan.duration_s, plan.blind_m
+    ... for each tilt: move, wait for the servo, drop the scan under way, keep the next ...
+    cloud = merge(records, x, y, yaw)       # the localizer's pose of the robot, standing
+
+**Tilts are relative to the horizon.** The gimbal levels them against the AHRS pitch (servo
+tilt = plan tilt - chassis pitch when panned straight ahead), so the lines land where planned
+on a pitched chassis too. The records carry the servo's own tilt and the AHRS attitude, and
+`merge` uses those, so a levelling error only moves lines, it does not bend the cloud. Roll
+cannot be levelled with a pan/tilt head: it tips the lines sideways (1 deg is 3 cm at 1.9 m to
+the side), which is why `region_distances` reaches 0.3 m past the region by default. A rock
+is seen to its top only by lines that reach past it by height x distance / h (0.6 m for a
+15 cm rock 3 m out): the far rows of the region are measured from their lower part.
+
+**Stop-and-go**, as the thesis did it: the gimbal moves to a tilt (a trapezoid at the servo's
 velocity limit and acceleration), the scan under way when it arrives is dropped (its beams
-straddle two tilts), the next full scan is kept. So each tilt costs its move plus up to two
-scan periods (25 ms each), and `SweepPlan.duration_s` is that worst case, back to level at
-the end.
+straddle two tilts), the next full scan is kept: each tilt costs its move plus up to two scan
+periods (25 ms each). `SweepPlan.duration_s` is that worst case, back to `end_deg` after.
+With autonomy.yaml's tilt servo (60 deg/s, 360 deg/s^2) the start-region sweep below is 82
+scans and 12.6 s; the moves dominate (small steps are acceleration-bound).
 
-    plan = plan_sweep(mount, pivot, near_m=0.55, far_m=3.6, tilt_max_deg=45, ...)
-    for tilt in plan.tilts_deg: ... move, wait, take a ScanRecord ...
-    cloud = merge(records, x, y, yaw)        # the localizer's pose of the robot
+**The tilt limit blinds the scanner close ahead**: level ground nearer than
+`ground_ahead(mount, pivot, tilt_max)` is never seen (`SweepPlan.blind_m`). With the
+simulator's scanner (0.40 m ahead, 0.70 m up) and autonomy.yaml's assumed 45 deg travel
+that is 1.10 m ahead of the footprint centre: from the start region (x <= 0.9 facing +x) the
+first 0.2 m of the obstacle region. 75 deg brings it down to 0.59 m, inside the start region.
 
-`merge` puts every valid return in the arena frame (SPEC 6.1) with each record's own roll
-and pitch (the AHRS' at that scan) and remembers where each point came from (which scan,
-which beam, the LIDAR's centre), which the obstacle detector needs to reason about what a
-beam passed over (`ramp.autonomy.perception.obstacles`).
-
-A moving robot is not supported: the sweep is taken standing still, and one pose is given
-for all of it (the mission stops to scan).
+`merge` puts every valid return in the arena frame (SPEC 6.1) with each record's own roll and
+pitch and remembers where each point came from (which scan, which beam, the scanner's
+centre), which the obstacle detector needs to reason about what a beam passed over
+(`ramp.autonomy.perception.obstacles`). One pose for the whole sweep: the robot stands still.
 """
 
 from __future__ import annotations
@@ -33,12 +46,17 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
+from ramp.autonomy import arena
 from ramp.autonomy.mount import Mount, Vec3, lidar_pose, rotation_zyx
 from ramp.autonomy.perception.records import FloatArray, ScanRecord
+
+if TYPE_CHECKING:
+    from ramp.autonomy.config import AutonomyConfig
 
 IntArray = npt.NDArray[np.intp]
 
@@ -47,7 +65,8 @@ SCAN_PERIOD_S = 0.025  # UTM-30LX-EW: 40 scans a second (SPEC 6.2)
 
 @dataclass(frozen=True)
 class SweepPlan:
-    """The tilts of one 3D scan, in the order to visit them, and what the sweep costs.
+    """The tilts of one 3D scan (degrees nose down from the horizon, at `pan_deg`), in the
+    order to visit them, and what the sweep costs.
 
     `near_m`..`far_m` is the stretch of level ground ahead of the robot's footprint centre
     (chassis x) that the ground lines cover, `spacing_m` apart; `near_m` may be farther than
@@ -152,6 +171,31 @@ def plan_sweep(mount: Mount, pivot: Vec3, *, near_m: float, far_m: float,
                      spacing_m=(far_m - near) / (n - 1), blind_m=blind, start_deg=start_deg,
                      end_deg=end_deg, scan_period_s=scan_period_s, move_s=moving,
                      scanning_s=scanning, duration_s=moving + scanning)
+
+
+def region_distances(robot_x: float, x_from: float = arena.START_END_X_M,
+                     x_to: float = arena.OBSTACLE_END_X_M,
+                     far_margin_m: float = 0.3) -> tuple[float, float]:
+    """(near_m, far_m) for `plan_sweep` that cover the arena from `x_from` to `x_to` (SPEC
+    6.1's obstacle region by default) and `far_margin_m` beyond, for a robot at `robot_x`
+    facing +x (its heading within a few degrees). A `near_m` under the blind distance is
+    fine: the plan starts where the tilt limit lets it."""
+    near = max(x_from - robot_x, 0.05)
+    far = x_to + far_margin_m - robot_x
+    if far <= near:
+        raise ValueError(f"nothing to scan ahead of x = {robot_x} between {x_from} and {x_to}")
+    return near, far
+
+
+def sweep_from_config(config: AutonomyConfig, near_m: float, far_m: float,
+                      spacing_m: float = 0.04, pan_deg: float = 0.0) -> SweepPlan:
+    """`plan_sweep` with the LIDAR mount, the gimbal's pivot and its tilt servo (limits,
+    velocity, acceleration) of an `autonomy.yaml`."""
+    tilt = config.gimbal.tilt
+    return plan_sweep(config.lidar.mount, config.gimbal.pivot, near_m=near_m, far_m=far_m,
+                      spacing_m=spacing_m, tilt_min_deg=tilt.min_deg, tilt_max_deg=tilt.max_deg,
+                      velocity_dps=tilt.velocity_dps, acceleration_dps2=tilt.acceleration_dps2,
+                      pan_deg=pan_deg)
 
 
 @dataclass(frozen=True, eq=False)
