@@ -226,6 +226,21 @@ def test_smaller_rocks_when_found_are_measured_as_well(start_region: list) -> No
         assert m.position_error <= POSITION_BOUND and abs(m.diameter_error) <= DIAMETER_BOUND
 
 
+def test_an_obstacle_half_hidden_behind_a_rock_is_flagged_partial(start_region: list) -> None:
+    """Seed 267: the 17 cm crater at (4.14, 1.25) lies half in the shadow of a 26 cm rock
+    0.6 m nearer the scanner. It is found, from its visible part (too small by 5 cm), and
+    says so; the rock in front is whole. Of the 40 layouts above, few have any."""
+    x, y, yaw = start_pose(267)
+    scene = scan_world(MarteWorld.seeded(267), x, y, yaw, seed=267)
+    matches, _ = match(scene, detect_obstacles(scene.cloud).obstacles)
+    by_place = {(m.kind, round(m.truth["x"], 2)): m.found for m in matches}
+    hidden, rock = by_place[("crater", 4.14)], by_place[("rock", 3.51)]
+    assert hidden is not None and hidden.partial and hidden.d < 0.174
+    assert rock is not None and not rock.partial
+    flagged = [q for _, det, _, _ in start_region for q in det.obstacles if q.partial]
+    assert len(flagged) <= 3
+
+
 def test_the_labels_say_what_each_point_was_taken_for(start_region: list) -> None:
     scene, det, matches, _ = start_region[0]
     for m in matches:
@@ -365,8 +380,8 @@ def _moved(cloud: Cloud, dx: float, dy: float, dyaw: float) -> Cloud:
 
 def test_a_wobbling_ahrs_is_levelled_out_scan_by_scan() -> None:
     """0.15 deg of scan-to-scan attitude noise moves a far line's ground by 8 mm, as much as
-    a far crater's wall is seen below it: without levelling each scan on the ground, two of
-    these layouts' craters are lost or mis-measured; with it, none."""
+    a far crater's wall is seen below it: without levelling each scan on the ground, some
+    of these layouts' craters are lost or mis-measured (2-3); with it, none."""
     failures = {0: 0, 2: 0}
     for seed in range(4):
         scene = scan_world(MarteWorld.seeded(seed), 0.9, 1.94, 0.0, seed=seed, wobble_deg=0.15)
@@ -377,4 +392,4 @@ def test_a_wobbling_ahrs_is_levelled_out_scan_by_scan() -> None:
                 m.found is None or m.found.kind != m.kind
                 or abs(m.diameter_error) > DIAMETER_BOUND or m.position_error > POSITION_BOUND
                 for m in matches if m.truth["d"] >= 0.15)
-    assert failures == {0: 2, 2: 0}
+    assert failures[2] == 0 and failures[0] >= 2
