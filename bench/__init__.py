@@ -12,7 +12,13 @@ from importlib.util import find_spec
 
 #: Sections that measure the removable autonomy package: present only when it is.
 AUTONOMY_SECTIONS: tuple[str, ...] = (
-    ("autonomy_sensors", "lidar_codec", "planner", "rig")
+    (
+        "autonomy_sensors",
+        "lidar_codec",
+        "planner",
+        "rig",
+        "obstacles",
+    )
     if find_spec("ramp.autonomy") is not None else ())
 
 #: Benchmark names, in the order they run.

@@ -207,6 +207,21 @@ def render(doc: dict[str, Any]) -> str:
                     _row(f"{label}: CPU s per simulated minute",
                          r[key]["cpu_s_per_simulated_minute"], " s")]
         out.append("")
+    o = doc.get("obstacles")
+    if o and "error" not in o:
+        acc = o["accuracy"]
+        out += [f"**obstacles** (one 3D scan: {o['scans']} scans, {o['cloud_points']:,} points, "
+                f"over {o['layouts']} seeded layouts; baseline: a least-squares plane through "
+                "the same cloud)", "", HEAD,
+                _row("merge + detection, median", o["merge_and_detect_ms"]["p50"], " ms"),
+                _row("merge + detection, worst", o["merge_and_detect_ms"]["max"], " ms"),
+                "", f"Merge alone {_num(o['merge_ms']['p50'])} ms, detection alone "
+                f"{_num(o['detect_ms']['p50'])} ms (medians); the sweep itself takes "
+                f"{o['sweep_duration_s']} s of gimbal time. On these layouts: "
+                f"{acc['found']}/{acc['required']} obstacles of 15 cm or more found, worst "
+                f"position error {acc['worst_position_cm']} cm, worst diameter error "
+                f"{acc['worst_diameter_cm']} cm, {acc['false_per_layout']} false obstacles "
+                "per layout.", ""]
     return "\n".join(out)
 
 
