@@ -40,7 +40,7 @@ def test_the_example_for_marte_loads() -> None:
     assert cfg.imu.mount == Mount(x=0.0, y=0.10, z=0.35)
     g = cfg.gimbal
     assert (g.pan.channel, g.tilt.channel) == (0, 1) and g.tilt.reversed
-    assert (g.tilt.min_deg, g.tilt.max_deg) == (-30.0, 45.0)
+    assert (g.tilt.min_deg, g.tilt.max_deg) == (-30.0, 80.0)
     assert g.pivot == (0.40, 0.0, 0.70)
     assert cfg.mission["duration_s"] == 600.0 and cfg.mission["max_relocalize_tries"] == 3
 

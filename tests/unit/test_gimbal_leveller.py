@@ -91,9 +91,10 @@ def test_a_step_moves_no_faster_than_the_servos_velocity_limit() -> None:
 
 
 def test_beyond_the_servos_travel_it_saturates_and_says_so() -> None:
-    g = Gimbal(pitch_deg=-20.0)  # nose up 20: 30 deg below the horizon needs 50 deg of tilt
-    g.leveller.level(30.0)
-    g.run(1.5)
+    g = Gimbal(pitch_deg=-20.0)  # nose up 20: 70 deg below the horizon needs 90 deg of tilt
+    assert g.config.tilt.max_deg < 90.0
+    g.leveller.level(70.0)
+    g.run(2.5)
     assert g.leveller.saturated
     assert g.leveller.target is not None and g.leveller.target[1] == g.config.tilt.max_deg
     g.leveller.level(0.0)
