@@ -171,7 +171,8 @@ class Mission:
         self._fire("start", f"run of {cfg.duration_s:g} s")
 
     def tick(self, now: float, dt: float) -> None:
-        """One iteration: at most one decision, then the current activity's tick."""
+        """One iteration: the first check that calls for a change makes it (see the module
+        docstring for their order); when none does, the current activity ticks."""
         self._now = now
         if self.state in (INITIAL, FINAL):
             return
