@@ -96,6 +96,14 @@ MISSION_FIELDS: dict[str, Field] = {
     "sweep_end_deg": Field(float, 40.0, lo=-30.0, hi=80.0,
                            what="a tilt below the horizon in degrees"),
     "sweep_speed_dps": Field(float, 5.0, lo=0.5, hi=90.0, what="a tilt speed in deg/s"),
+    # the state machine's (ramp/statemachine/settings.py MissionConfig; a test keeps both equal)
+    "max_step_retries": Field(int, 3, lo=0, hi=100, what="a number of tries"),
+    "min_pose_confidence": Field(float, 0.5, lo=0.0, hi=1.0, what="a confidence (0-1)"),
+    "min_return_load_kg": Field(float, 1.0, lo=0.0, hi=1000.0, what="a load in kg"),
+    "trip_estimate_s": Field(float, 60.0, lo=0.0, hi=3600.0, what="a time in s"),
+    "dock_deposit_estimate_s": Field(float, 60.0, lo=0.0, hi=3600.0, what="a time in s"),
+    "min_dig_s": Field(float, 30.0, lo=0.0, hi=3600.0, what="a time in s"),
+    "stop_settle_s": Field(float, 1.0, lo=0.0, hi=60.0, what="a time in s"),
 }
 
 TOP_KEYS = ("backend", "lidar", "imu", "gimbal", "mission")
