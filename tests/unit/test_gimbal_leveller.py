@@ -98,7 +98,7 @@ def test_beyond_the_servos_travel_it_saturates_and_says_so() -> None:
     assert g.leveller.saturated
     assert g.leveller.target is not None and g.leveller.target[1] == g.config.tilt.max_deg
     g.leveller.level(0.0)
-    g.run(1.0)
+    g.run(2.0)  # 60 deg back at the controller's 60 deg/s
     assert not g.leveller.saturated and g.leveller.settled
 
 
