@@ -209,24 +209,49 @@ def _segment(pts: FloatArray, rows: IntArray, origin: tuple[float, float]) -> Se
 
 
 def _merge(pts: FloatArray, segments: list[Segment], origin: tuple[float, float],
-           p: LineParams) -> list[Segment]:
-    """Join neighbouring segments that lie on one line (a wall cut by dust or a gap)."""
+           p: LineParams, look_ahead: int = 3) -> list[Segment]:
+    """Join segments that lie on one line: neighbours (a wall cut by dust or a missing
+    beam), or two pieces with only nearer things between them (a wall partly hidden by a
+    rock or a post)."""
+    segs = list(segments)
+    changed = True
+    while changed:
+        changed = False
+        for i in range(len(segs)):
+            for j in range(i + 1, min(i + 1 + look_ahead, len(segs))):
+                between = segs[i + 1:j]
+                if not all(_in_front(b, segs[i], origin, p) for b in between):
+                    break
+                joined = _joined(pts, segs[i], segs[j], origin, p)
+                if joined is not None:
+                    segs = segs[:i] + [joined] + between + segs[j + 1:]
+                    changed = True
+                    break
+            if changed:
+                break
+    return segs
+
+
+def _in_front(seg: Segment, wall: Segment, origin: tuple[float, float],
+              p: LineParams) -> bool:
+    """Both ends of `seg` are nearer the sensor than `wall`'s line (it is an occluder)."""
+    nx, ny = wall.normal
+    off = wall.rho - p.merge_dist
+    return all(nx * (q[0] - origin[0]) + ny * (q[1] - origin[1]) < off
+               for q in (seg.start, seg.end))
+
+
+def _joined(pts: FloatArray, a: Segment, b: Segment, origin: tuple[float, float],
+            p: LineParams) -> Segment | None:
+    """`a` and `b` as one segment, when they are on one line; else None."""
     cos_max = math.cos(math.radians(p.merge_angle_deg))
-    merged = True
-    while merged and len(segments) > 1:
-        merged = False
-        out: list[Segment] = [segments[0]]
-        for seg in segments[1:]:
-            prev = out[-1]
-            same_way = prev.normal[0] * seg.normal[0] + prev.normal[1] * seg.normal[1] >= cos_max
-            gap = math.hypot(seg.start[0] - prev.end[0], seg.start[1] - prev.end[1])
-            if same_way and abs(prev.rho - seg.rho) <= p.merge_dist and gap <= p.merge_gap:
-                rows = np.concatenate((prev.indices, seg.indices))
-                joined = _segment(pts, rows, origin)
-                if joined.rms <= max(p.merge_rms, prev.rms, seg.rms):
-                    out[-1] = joined
-                    merged = True
-                    continue
-            out.append(seg)
-        segments = out
-    return segments
+    if a.normal[0] * b.normal[0] + a.normal[1] * b.normal[1] < cos_max:
+        return None
+    if abs(a.rho - b.rho) > p.merge_dist:
+        return None
+    if math.hypot(b.start[0] - a.end[0], b.start[1] - a.end[1]) > p.merge_gap:
+        return None
+    joined = _segment(pts, np.concatenate((a.indices, b.indices)), origin)
+    if joined.rms > max(p.merge_rms, a.rms, b.rms):
+        return None
+    return joined

@@ -155,6 +155,7 @@ class LocalizerParams:
     feasible_slack: float = 0.15  # the footprint may poke this far out of the arena
     hint_margin: float = 0.15  # a hinted pose may lie this far outside its box
     quality_scale: float = 0.02  # candidates' weights fall by e per this much quality
+    quality_gap: float = 0.08  # a chosen pose explaining this much less than the best: lost
     # loss detection
     min_wall_points: int = 40
     max_rms: float = 0.05
@@ -510,12 +511,15 @@ def localize_points(xy: FloatArray, segments: tuple[Segment, ...], *, hint: str 
     if prior is not None:
         seeds.append(prior.pose)
     if not seeds:
+        if segments:
+            return _lost("only walls along one direction in view: the position along them "
+                         "is unobservable", segments=segments)
         return _lost("no straight wall in view", segments=segments)
 
     fits = _unique([refine(xy, s, a, p) for s in _promising(xy, seeds, a, p)])
     box = a.hint_box(hint) if hint is not None else None
     notes: list[str] = []
-    weights: list[float] = []
+    logw: list[float] = []  # log weights: odometry far off must not underflow to zero
     best_quality = max((f.quality for f in fits), default=-math.inf)
     for f in fits:
         note = ""
@@ -523,23 +527,24 @@ def localize_points(xy: FloatArray, segments: tuple[Segment, ...], *, hint: str 
             note = "the robot would stand outside the arena"
         elif box is not None and not _in_box(f.pose, box, p.hint_margin):
             note = f"outside the {hint} start box"
-        w = 0.0
+        lw = -math.inf
         if not note:
-            w = math.exp((f.quality - best_quality) / p.quality_scale)
+            lw = (f.quality - best_quality) / p.quality_scale
             if yaw_prior is not None:
                 z = _wrap(f.pose.yaw - yaw_prior) / yaw_sigma
-                w *= math.exp(-0.5 * z * z)
+                lw -= 0.5 * z * z
             if prior is not None:
-                w *= math.exp(-0.5 * _mahalanobis2(f, prior, p))
+                lw -= 0.5 * _mahalanobis2(f, prior, p)
         notes.append(note)
-        weights.append(w)
+        logw.append(lw)
+    top = max(logw)
+    weights = [math.exp(w - top) if math.isfinite(w) else 0.0 for w in logw]
     total = sum(weights)
     probs = [w / total if total > 0 else 0.0 for w in weights]
     cands = tuple(Candidate(f.pose, f.quality, f.inliers, f.rms, f.through, pr, note)
                   for f, pr, note in zip(fits, probs, notes, strict=True))
     if total <= 0.0:
-        reasons = sorted({n for n in notes if n})
-        why = "; ".join(reasons) if reasons else "no candidate fits the priors"
+        why = "; ".join(sorted({n for n in notes if n}))
         return _lost(f"no acceptable pose: {why}", candidates=cands, segments=segments)
 
     k = int(np.argmax(probs))
@@ -549,6 +554,12 @@ def localize_points(xy: FloatArray, segments: tuple[Segment, ...], *, hint: str 
     if prior is not None:
         fused_pose, fused_cov = kalman_update(prior.pose, prior.cov, best.pose, cov)
     factors, failures = _judge(best, probs[k], fused_cov, yaw_prior, yaw_sigma, prior, cov, p)
+    if best_quality - best.quality > p.quality_gap:
+        # The priors chose a pose the scan fits clearly worse than another one: a wrong
+        # start box, or a yaw prior far off. Do not believe either; say so.
+        failures.append(f"the scan fits a pose the priors rule out better (explains "
+                        f"{best_quality * 100:.0f}% of it, the chosen one "
+                        f"{max(best.quality, 0.0) * 100:.0f}%)")
     conf = float(np.prod([v for v, _ in factors]))
     if failures or conf < HIGH_CONFIDENCE:
         reason = "; ".join(failures) if failures else min(factors)[1]

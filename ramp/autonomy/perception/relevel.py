@@ -97,6 +97,10 @@ class RelevelParams:
     min_gain: float = 10.0  # the correction must lower the cost this much
     ambiguity_tilt: float = math.radians(2.5)  # two answers this far apart ...
     ambiguity_gain: float = 6.0  # ... and this close in cost: the scan cannot tell
+    # The cost's curvature gives the correction's uncertainty: wider than this in roll or
+    # pitch and the scan does not pin the tilt down (walls alone say little about it).
+    sigma_step: float = math.radians(1.0)
+    max_sigma: float = math.radians(1.0)
     grid_stride: int = 3  # use every n-th echo in the grid stage (speed)
     refine_top: int = 4  # hypotheses refined by Gauss-Newton
     max_poses: int = 4
@@ -122,6 +126,7 @@ class Relevel:
     level_cost: float = math.nan  # model cost without it (same pose search)
     ground_points: int = 0  # echoes explained as floor under the correction
     missing_explained: int = 0  # missing echoes the correction explains
+    sigma: tuple[float, float] = (math.inf, math.inf)  # rad, of the correction's roll, pitch
 
     def apply(self, record: ScanRecord) -> ScanRecord:
         """The record with the chassis attitude the scan says (roll, pitch)."""
@@ -152,6 +157,7 @@ class _Scan3D:
     echoes: FloatArray  # (n, 3) believed level frame, the robot's own frame removed
     misses: FloatArray  # (m, 3) unit directions of beams with no echo, believed level frame
     origin: FloatArray  # (3,) the LIDAR in the believed level frame
+    lidar: FloatArray  # (3, 3) LIDAR axes -> believed level frame
     beams: int  # beams in the scan
 
 
@@ -167,7 +173,7 @@ def _scan3d(record: ScanRecord, lp: LocalizerParams, a: ArenaMap) -> _Scan3D:
     miss = ~record.valid
     ang = record.angles[miss]
     dirs = np.column_stack((np.cos(ang), np.sin(ang), np.zeros_like(ang))) @ lidar.T
-    return _Scan3D(level, dirs, origin, int(record.ranges.size))
+    return _Scan3D(level, dirs, origin, lidar, int(record.ranges.size))
 
 
 def _grid(p: RelevelParams) -> FloatArray:
@@ -317,6 +323,19 @@ class _Search:
         return _Eval(scan_cost + self.priors.cost(pose), scan_cost, pose, c, int(floor[0]),
                      int(expl[0]))
 
+    def sigma(self, e: _Eval) -> tuple[float, float]:
+        """One-sigma uncertainty (rad) of the correction's roll and pitch, from the scan's
+        part of the cost's curvature (the prior for level taken out)."""
+        d = self.p.sigma_step
+        r0, p0 = _roll_pitch(e.c)
+        out = []
+        for dr, dp in ((d, 0.0), (0.0, d)):
+            plus = self.evaluate(_correction(r0 + dr, p0 + dp), e.pose, e.c).cost
+            minus = self.evaluate(_correction(r0 - dr, p0 - dp), e.pose, e.c).cost
+            k = (plus + minus - 2.0 * e.cost) / (d * d) - 1.0 / self.p.tilt_sigma ** 2
+            out.append(1.0 / math.sqrt(k) if k > 0.0 else math.inf)
+        return out[0], out[1]
+
     def polish(self, e: _Eval) -> _Eval:
         """Pattern search in roll and pitch around a hypothesis, halving the step."""
         step = self.p.tilt_step / 2.0
@@ -387,16 +406,21 @@ def relevel(record: ScanRecord, *, first: Localization | None = None,
         evals.append(search.evaluate(level, seed, level))
     evals.sort(key=lambda e: e.cost)
     levels = [e for e in evals if _angle_of(e.c) < 1e-9]
-    polished = [search.polish(e) for e in evals[:2]]
+    polished = [search.polish(e) for e in evals[:3]]
     best = min(polished, key=lambda e: e.cost)
-    # A tilt the other way about the same axis explains a scan with no ground and no
-    # missing echoes about as well: try it explicitly, so that ambiguity shows.
-    mirror = search.polish(search.evaluate(best.c.T, best.pose, best.c))
-    rivals = polished + [mirror] + evals[3:]
+    # A scan plane tipped the other way about the same horizontal axis projects onto the
+    # floor exactly as this one does: only heights (the floor, the walls' top, missing
+    # echoes) tell them apart. Try those mirror images explicitly, so an ambiguity shows.
+    mirrors = [search.polish(search.evaluate(c, best.pose, best.c))
+               for c in _mirrors(best.c, s.lidar)]
+    rivals = polished + mirrors + evals[3:]
     best = min(rivals, key=lambda e: e.cost)
-    level_best = min(levels, key=lambda e: e.cost)
+    # The best the scan can be explained level, whatever the priors say of that pose.
+    level_best = min(levels, key=lambda e: e.scan_cost)
     tilt = _angle_of(best.c)
-    found = tilt >= p.min_tilt and level_best.cost - best.cost >= p.min_gain
+    # The scan itself must be better explained (the priors only rank the poses: a tilt must
+    # not be invented to pull a pose towards a wrong odometry prior).
+    found = tilt >= p.min_tilt and level_best.scan_cost - best.scan_cost >= p.min_gain
     reason = (f"tilted {math.degrees(tilt):.1f} deg: {best.floor} ground returns, "
               f"{best.explained} missing echoes explained, cost {best.cost:.0f} vs "
               f"{level_best.cost:.0f} level")
@@ -411,9 +435,26 @@ def relevel(record: ScanRecord, *, first: Localization | None = None,
             reason = (f"ambiguous tilt: {math.degrees(tilt):.1f} deg and "
                       f"{math.degrees(_angle_of(close[0].c)):.1f} deg (about another axis "
                       "or the other way) explain the scan about as well")
+    sigma = search.sigma(best)
+    if found and max(sigma) > p.max_sigma:
+        found = False
+        reason = (f"tilt poorly determined: {math.degrees(tilt):.1f} deg, +-"
+                  f"{math.degrees(sigma[0]):.1f} deg in roll, +-{math.degrees(sigma[1]):.1f} "
+                  "deg in pitch")
     pose = Pose(best.pose.x, best.pose.y, math.remainder(best.pose.yaw, 2.0 * math.pi))
     return _result(record, best.c, found, reason, pose, best.cost, level_best.cost,
-                   best.floor, best.explained)
+                   best.floor, best.explained, sigma)
+
+
+def _mirrors(c: FloatArray, lidar: FloatArray) -> list[FloatArray]:
+    """Corrections that tip the true scan plane (c @ lidar, LIDAR axes -> level) the other
+    way in pitch, in roll, or both, keeping its heading."""
+    true = c @ lidar
+    roll, pitch, yaw = euler_zyx(tuple(map(tuple, true)))  # type: ignore[arg-type]
+    out = []
+    for r, p in ((roll, -pitch), (-roll, pitch), (-roll, -pitch)):
+        out.append(np.asarray(rotation_zyx(r, p, yaw)) @ lidar.T)
+    return out
 
 
 def _angle_between(c1: FloatArray, c2: FloatArray) -> float:
@@ -422,26 +463,35 @@ def _angle_between(c1: FloatArray, c2: FloatArray) -> float:
 
 def _pose_seeds(first: Localization | None, poses: Sequence[Pose], prior: PosePrior | None,
                 priors: _Priors, limit: int) -> list[Pose]:
+    """Poses to search the tilt from: those the priors like best, and the two the scan fits
+    best (a wrong prior must not hide the level explanation)."""
     seeds = list(poses)
     if prior is not None:
         seeds.append(prior.pose)
+    fitting: list[Pose] = []
     if first is not None:
         if first.pose is not None:
             seeds.append(first.pose)
         seeds.extend(c.pose for c in first.candidates)
+        fitting = [c.pose for c in sorted(first.candidates, key=lambda c: -c.quality)[:2]]
+    ranked = _distinct(sorted(seeds, key=priors.cost))
+    head = max(1, limit - len(fitting))
+    return _distinct(ranked[:head] + fitting + ranked[head:])[:limit]
+
+
+def _distinct(poses: list[Pose]) -> list[Pose]:
     out: list[Pose] = []
-    for s in sorted(seeds, key=priors.cost):
+    for s in poses:
         if all(math.hypot(s.x - o.x, s.y - o.y) > 0.1
                or abs(math.remainder(s.yaw - o.yaw, 2 * math.pi)) > math.radians(3)
                for o in out):
             out.append(s)
-        if len(out) >= limit:
-            break
     return out
 
 
 def _result(record: ScanRecord, c: FloatArray, found: bool, reason: str, pose: Pose | None,
-            cost: float, level_cost: float, floor: int, expl: int) -> Relevel:
+            cost: float, level_cost: float, floor: int, expl: int,
+            sigma: tuple[float, float] = (math.inf, math.inf)) -> Relevel:
     believed = np.asarray(rotation_zyx(record.roll, record.pitch, 0.0))
     true = c @ believed
     roll, pitch, _ = euler_zyx(tuple(map(tuple, true)))  # type: ignore[arg-type]
@@ -451,7 +501,7 @@ def _result(record: ScanRecord, c: FloatArray, found: bool, reason: str, pose: P
     l_roll, l_pitch, _ = euler_zyx(tuple(map(tuple, err)))  # type: ignore[arg-type]
     return Relevel(found, reason, c, _angle_of(c), roll, pitch, roll - record.roll,
                    pitch - record.pitch, l_roll, l_pitch, -l_pitch, pose, cost, level_cost,
-                   floor, expl)
+                   floor, expl, sigma)
 
 
 def _nothing(record: ScanRecord, reason: str) -> Relevel:
