@@ -91,7 +91,7 @@ def test_the_robots_own_posts_and_a_rock_are_not_walls() -> None:
         ranges[lo:hi] = 0.4
     # A 0.3 m round rock 1.5 m ahead: an arc, not a straight surface.
     cx, r = 1.5, 0.15
-    c, s = np.cos(ANGLES), np.sin(ANGLES)
+    c = np.cos(ANGLES)
     disc = cx * c
     under = disc ** 2 - (cx ** 2 - r ** 2)
     hit = (under > 0) & (c > 0)
