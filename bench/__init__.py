@@ -12,7 +12,8 @@ from importlib.util import find_spec
 
 #: Sections that measure the removable autonomy package: present only when it is.
 AUTONOMY_SECTIONS: tuple[str, ...] = (
-    ("autonomy_sensors", "lidar_codec") if find_spec("ramp.autonomy") is not None else ())
+    ("autonomy_sensors", "lidar_codec", "localizer") if find_spec("ramp.autonomy") is not None
+    else ())
 
 #: Benchmark names, in the order they run.
 SECTIONS = ("tick", "round_trip", "command_to_wire", "watchdog_to_wire", "startup", "arena",

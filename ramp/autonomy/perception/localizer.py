@@ -26,32 +26,47 @@ One localization (`localize`, pure):
    prior (`yaw_prior` ± `yaw_sigma`) and an odometry prior pose with its covariance.
 5. **Loss detection**: too few wall points, a large residual, a low share of explained
    points, candidates the priors cannot separate (best probability under `min_separation`),
-   an unobservable direction with no prior to fill it, a pose outside the hint box, or
-   disagreement with the yaw prior (beyond `yaw_gate` sigmas) or with odometry (Mahalanobis
-   distance beyond `odometry_gate`) -> `lost` with a `reason`, `pose` None. Otherwise the
-   confidence is a product of factors in 0..1 and is at least `HIGH_CONFIDENCE`.
+   an unobservable direction with no prior to fill it, a pose outside the hint box, a pose
+   the priors chose that the scan fits clearly worse than one they rule out (a wrong hint),
+   or disagreement with the yaw prior (beyond `yaw_gate` sigmas) or with odometry
+   (Mahalanobis distance beyond `odometry_gate`) -> `lost` with a `reason`, `pose` None.
+   Otherwise the confidence is a product of factors in 0..1 and at least `HIGH_CONFIDENCE`.
+6. **Tilt** (`relevel=True`, the default): when the scan is lost or looks tilted
+   (`relevel.suspect_tilt`: missing echoes, returns above the walls or under the floor, an
+   attitude the raked arena does not allow), `relevel.relevel` searches the LIDAR's true
+   tilt; when it finds one, the re-levelled scan is localized (its covariance widened by
+   the tilt's uncertainty) and the correction is in `Localization.relevel` for the AHRS
+   and the gimbal to apply. A scan that looks tilted whose tilt cannot be found is `lost`.
 
 `Localizer` keeps the pose between scans: `predict(dx, dy, dyaw)` with the odometry the
 caller integrates from its drive commands (robot frame, since the last call), `update(record)`
 corrects it with the scan (a Kalman update with the scan's covariance, gated by the same loss
-checks), `initialise(record, hint=...)` and `relocalize(record)` search globally. When a scan
-loses the walls, `update` tries `relevel.relevel` and localizes the re-levelled scan; the
-correction is in the result for the gimbal and the AHRS to apply.
+checks; while lost the estimate is dead-reckoned), `initialise(record, hint=...)` and
+`relocalize(record)` search globally (the recovery after a loss).
 
-API (all angles radians, arena frame of SPEC 6.1)::
+API (all angles radians, arena frame of SPEC 6.1; nothing here reads a clock or does I/O)::
 
-    HIGH_CONFIDENCE = 0.5
-    Pose(x, y, yaw)                                  NamedTuple
-    PosePrior(pose, cov)                             cov 3x3 (m^2, rad^2)
+    HIGH_CONFIDENCE = 0.5      a pose is reported (lost False) iff confidence >= this
+    YAW_SIGMA = radians(15)    default one-sigma of an AHRS yaw prior
+    Pose(x, y, yaw)            NamedTuple, footprint centre (m) and yaw (rad)
+    PosePrior(pose, cov)       an odometry pose and its 3x3 covariance (m^2, rad^2)
     localize(record, *, hint=None, yaw_prior=None, yaw_sigma=YAW_SIGMA, prior=None,
-             params=LocalizerParams(), arena=ArenaMap()) -> Localization
-    Localization: pose (Pose | None), confidence, lost, reason, candidates (Candidate...),
-                  wall_points, residual_rms, covariance (3x3 | None), segments, relevel
-    Candidate: pose, quality, inliers, rms, through, probability, note
-    Localizer(params, odometry=OdometryNoise(), arena=ArenaMap(), yaw_sigma=YAW_SIGMA)
-        .initialise(record, hint=None, yaw_prior=None) / .predict(dx, dy, dyaw)
-        .update(record, yaw_prior=<record.yaw>, relevel=True) / .relocalize(record, ...)
-        .pose, .covariance, .lost
+             relevel=True, params=None, arena_map=None) -> Localization
+    Localization: pose (Pose | None), confidence (0..1), lost, reason ("" unless lost),
+                  candidates (Candidate, ...), wall_points, residual_rms (m),
+                  covariance (3x3 | None), segments (lines.Segment in the level frame),
+                  relevel (relevel.Relevel | None), best (the most probable candidate)
+    Candidate: pose, quality, inliers, rms, through, probability, note (why rejected)
+    Localizer(params=None, odometry=OdometryNoise(), arena_map=None, yaw_sigma=YAW_SIGMA,
+              relevel=True)
+        .initialise(record, *, hint=None, yaw_prior=None, yaw_sigma=None) -> Localization
+        .predict(dx, dy, dyaw)                      robot-frame motion since the last call
+        .update(record, *, yaw_prior=record.yaw, yaw_sigma=None) -> Localization
+        .relocalize(record, *, yaw_prior=record.yaw, yaw_sigma=None) -> Localization
+        .pose, .covariance, .lost, .last
+    wall_points(record, params=None, arena_map=None) -> WallPoints(xy, beams, sensor, total)
+    ArenaMap(length, width, wall_height, wall_top, robot_length, robot_width)
+    LocalizerParams(...), OdometryNoise(...): the thresholds, each with its reason
 """
 
 from __future__ import annotations
@@ -478,7 +493,8 @@ def localize(record: ScanRecord, *, hint: str | None = None, yaw_prior: float | 
         if again.lost:
             again = replace(again, reason=f"{again.reason} (after re-levelling by "
                                           f"{math.degrees(fix.tilt):.1f} deg)")
-        return replace(again, relevel=fix)
+            return replace(again, relevel=fix)
+        return _tilt_uncertain(replace(again, relevel=fix), record, p)
     if first.lost or fix.tilt < RELEVEL_MIN_TILT:
         # Lost anyway, or the scan is best explained level: the suspicion is refuted.
         return replace(first, relevel=fix)
@@ -486,6 +502,24 @@ def localize(record: ScanRecord, *, hint: str | None = None, yaw_prior: float | 
                    confidence=min(first.confidence, HIGH_CONFIDENCE * 0.98),
                    reason=f"the scan looks tilted ({'; '.join(check.reasons)}) and its tilt "
                           f"cannot be found: {fix.reason}", relevel=fix)
+
+
+def _tilt_uncertain(res: Localization, record: ScanRecord, p: LocalizerParams) -> Localization:
+    """A re-levelled pose carries the tilt's uncertainty: an attitude error of e moves the
+    LIDAR by its height x sin(e) across the floor, which the walls cannot see."""
+    if res.relevel is None or res.covariance is None:
+        return res
+    height = abs(float(record.lidar_position[2]))
+    shift = height * math.sin(min(max(res.relevel.sigma), math.pi / 2))
+    cov = res.covariance.copy()
+    cov[:2, :2] += np.eye(2) * shift ** 2
+    sigma = position_sigma(cov)
+    if sigma > p.max_position_sigma:
+        return replace(res, pose=None, lost=True, covariance=cov,
+                       confidence=min(res.confidence, HIGH_CONFIDENCE * 0.98),
+                       reason=f"re-levelled, but the tilt is too uncertain for the position "
+                              f"({sigma:.2f} m sigma)")
+    return replace(res, covariance=cov)
 
 
 def _localize_2d(record: ScanRecord, hint: str | None, yaw_prior: float | None,

@@ -9,43 +9,62 @@ carries the evidence of its tilt:
   h / sin(elevation), a line of points that lies on the plane z = 0 only under the true tilt;
 - **missing echoes**: beams tipped up pass over a wall's top (walls are at least
   `ArenaMap.wall_height` tall), so from the bearing where they vanish the tilt follows;
-- **wall points** at heights a wall cannot have, and the LIDAR itself displaced by
-  ~0.7 m x sin(error) when the chassis attitude is wrong.
+- **wall points** at heights a wall cannot have (above `ArenaMap.wall_top`, under the floor);
+- the LIDAR itself displaced by ~0.7 m x sin(error) when the chassis attitude is wrong,
+  which an odometry prior can see.
 
-`relevel` explains all of it at once with a 3D model of the arena (four vertical walls and
-the floor): for pose candidates (from a first localization, the odometry prior or both) it
-scores a grid of corrections C (tilts up to `max_tilt` about every horizontal axis; each
-with the pose moved so the LIDAR stays where the walls put it), then refines the best few by
-Gauss-Newton over (x, y, yaw, roll, pitch) on the echoes (wall points to their wall, ground
-points to the floor), and keeps the one with the lowest cost: truncated squared distances of
-the echoes to the model, plus one unit per missing echo the model says should have come back,
-plus a small prior that prefers level (a correction must earn its keep).
+`relevel` explains all of it at once with a 3D model of the arena (four vertical walls up
+to `ArenaMap.wall_top`, and the floor): for a few pose candidates (the odometry prior, the
+candidates of a first localization, the poses the scan fits best) it scores a grid of
+corrections C (tilts up to `max_tilt` about every horizontal axis, the pose moved so the
+LIDAR stays where the walls put it), fits the pose to the walls for the best of them, and
+polishes the best few by a pattern search in roll and pitch. The cost is a negative
+log-likelihood: each echo's squared distance to the model (wall, or floor at least
+`floor_wall_gap` inside the walls) in units of `sigma`, capped at an outlier's; one outlier
+per missing echo the model says should have come back; a small prior for level; and the
+priors on the pose (start box, yaw, odometry), which only rank poses.
+
+The answer is `found` only when it is clear: the tilt is at least `min_tilt`; the scan is
+better explained than by any level pose (by `min_gain`), or, when the scan alone cannot
+tell (an attitude error moves the LIDAR by ~0.7 m x sin(error), which a pose absorbs), the
+scan and agreeing priors are; no other tilt (about another axis, or the mirror image of the
+scan plane about the horizontal, which projects onto the floor identically) comes within
+`ambiguity_gain`; and the cost's curvature puts roll and pitch within `max_sigma`.
 
 The correction C turns the record's level frame (its believed roll and pitch) into the true
 one: true_level = C @ believed_level. The result gives it three ways:
 
 - `roll`, `pitch`: the chassis attitude the scan says (what the AHRS should have reported),
-  and `d_roll`, `d_pitch` the change from the record's (for the AHRS's attitude estimate or
-  its mount offset); `apply(record)` gives the record with the attitude corrected;
+  and `d_roll`, `d_pitch` the change from the record's: add them to the attitude estimate
+  (or the IMU's mount offset); `apply(record)` gives the record with the attitude corrected;
 - `lidar_pitch_error`, `lidar_roll_error`: how the scan plane is really turned in the
   LIDAR's own axes (nose down, left side up positive); `tilt_correction = -lidar_pitch_error`
-  is what to add to the gimbal's tilt set-point (positive tilt is nose down, as in
-  `ramp.autonomy.mount`). A pan/tilt gimbal cannot take out a roll about the scanner's own
-  axis at pan 0; the roll error says how much is left for the AHRS correction to fix.
+  is how much the gimbal's tilt moves when it levels against the corrected attitude
+  (positive tilt is nose down, as in `ramp.autonomy.mount`). A pan/tilt gimbal cannot take
+  out a roll about the scanner's own axis at pan 0; that part only the attitude fixes.
 
-`suspect_tilt(record)` is the quick check, needing no pose: missing echoes (in a closed
-arena a level scan gets an echo on every beam), returns below the ground or above any wall,
-or a ground plane (when the scan is tipped down and sees the floor) that is not level. It
-returns a `TiltCheck` (true when suspect) with the evidence and, given a pose, a `Relevel`.
+**Recovery recipe** (for the mission): when a level scan gives no clear tilt (`found`
+False, e.g. the walls in view are near and nothing went over a top), tip the gimbal 10-15
+deg further down so the floor is in view and `relevel` that scan with the odometry pose as
+`prior`: the floor pins the tilt. Then correct the attitude, rescan level and `localize`.
+
+`suspect_tilt(record)` is the quick check: missing echoes (in a closed arena a level beam
+always meets something; given a pose, only those the record's own attitude cannot explain),
+returns under the floor or above the walls' top, or an attitude the raked arena does not
+allow. It returns a `TiltCheck` (true when suspect) with the evidence and, on request with a
+pose, a `Relevel`: what the AHRS can use to flag an implausible gravity vector.
 
 API::
 
-    relevel(record, *, first=None, poses=(), hint=None, yaw_prior=None, yaw_sigma=...,
+    relevel(record, *, first=None, poses=(), hint=None, yaw_prior=None, yaw_sigma=YAW_SIGMA,
             prior=None, params=None, arena_map=None, relevel_params=None) -> Relevel
-    Relevel: found, reason, tilt, roll, pitch, d_roll, d_pitch, lidar_roll_error,
-             lidar_pitch_error, tilt_correction, correction (3x3), pose, cost, level_cost,
-             ground_points, missing_explained; apply(record) -> ScanRecord
-    suspect_tilt(record, pose=None, *, estimate=False, arena_map=None) -> TiltCheck
+    Relevel: found, reason, correction (3x3), tilt, roll, pitch, d_roll, d_pitch,
+             lidar_roll_error, lidar_pitch_error, tilt_correction (rad), pose (Pose | None),
+             cost, level_cost, ground_points, missing_explained, sigma (roll, pitch rad);
+             apply(record) -> ScanRecord
+    suspect_tilt(record, pose=None, *, estimate=False, arena_map=None, params=None,
+                 max_no_echo=0.01, crater_depth=0.35, wall_margin=0.05, min_count=5,
+                 max_lean=radians(5)) -> TiltCheck
     TiltCheck: suspect, reasons, no_echo_fraction, below_ground, above_walls,
                estimate (Relevel | None); bool(check) == suspect
 """
@@ -95,14 +114,16 @@ class RelevelParams:
     tilt_sigma: float = math.radians(3.0)  # prior for level: costs (tilt / sigma)^2 / 2
     min_tilt: float = RELEVEL_MIN_TILT  # smaller corrections are not worth reporting
     min_gain: float = 10.0  # the correction must lower the cost this much
+    prior_agreement: float = 4.5  # priors' cost (half a Mahalanobis^2) of an agreeing pose
     ambiguity_tilt: float = math.radians(2.5)  # two answers this far apart ...
     ambiguity_gain: float = 6.0  # ... and this close in cost: the scan cannot tell
     # The cost's curvature gives the correction's uncertainty: wider than this in roll or
     # pitch and the scan does not pin the tilt down (walls alone say little about it).
     sigma_step: float = math.radians(1.0)
-    max_sigma: float = math.radians(1.0)
+    max_sigma: float = math.radians(2.0)
     grid_stride: int = 3  # use every n-th echo in the grid stage (speed)
-    refine_top: int = 4  # hypotheses refined by Gauss-Newton
+    refine_top: int = 6  # distinct grid hypotheses per pose seed given a fitted pose
+    polish_top: int = 4  # of those, the best polished by a pattern search
     max_poses: int = 4
 
 
@@ -406,27 +427,36 @@ def relevel(record: ScanRecord, *, first: Localization | None = None,
         evals.append(search.evaluate(level, seed, level))
     evals.sort(key=lambda e: e.cost)
     levels = [e for e in evals if _angle_of(e.c) < 1e-9]
-    polished = [search.polish(e) for e in evals[:3]]
+    polished = [search.polish(e) for e in evals[:p.polish_top]]
     best = min(polished, key=lambda e: e.cost)
     # A scan plane tipped the other way about the same horizontal axis projects onto the
     # floor exactly as this one does: only heights (the floor, the walls' top, missing
     # echoes) tell them apart. Try those mirror images explicitly, so an ambiguity shows.
     mirrors = [search.polish(search.evaluate(c, best.pose, best.c))
                for c in _mirrors(best.c, s.lidar)]
-    rivals = polished + mirrors + evals[3:]
+    rivals = polished + mirrors + evals[p.polish_top:]
     best = min(rivals, key=lambda e: e.cost)
     # The best the scan can be explained level, whatever the priors say of that pose.
     level_best = min(levels, key=lambda e: e.scan_cost)
     tilt = _angle_of(best.c)
-    # The scan itself must be better explained (the priors only rank the poses: a tilt must
-    # not be invented to pull a pose towards a wrong odometry prior).
-    found = tilt >= p.min_tilt and level_best.scan_cost - best.scan_cost >= p.min_gain
+    # The scan itself must be better explained; or, with the scan alone unable to tell (a
+    # wrong attitude moves the LIDAR ~0.7 m x sin(error), which a pose can absorb), the
+    # scan and the priors together, provided the priors agree with the answer and no level
+    # pose explains the scan better (a tilt must not be invented to pull a pose towards a
+    # wrong odometry prior or into a wrong start box).
+    level_total = min(levels, key=lambda e: e.cost)
+    scan_gain = level_best.scan_cost - best.scan_cost
+    total_gain = level_total.cost - best.cost
+    agrees = priors.cost(best.pose) <= p.prior_agreement
+    found = tilt >= p.min_tilt and (
+        scan_gain >= p.min_gain
+        or (agrees and total_gain >= p.min_gain and scan_gain > -p.min_gain))
     reason = (f"tilted {math.degrees(tilt):.1f} deg: {best.floor} ground returns, "
               f"{best.explained} missing echoes explained, cost {best.cost:.0f} vs "
-              f"{level_best.cost:.0f} level")
+              f"{level_total.cost:.0f} level")
     if not found:
         reason = (f"no clear tilt (best {math.degrees(tilt):.1f} deg, cost {best.cost:.0f} "
-                  f"vs {level_best.cost:.0f} level)")
+                  f"vs {level_total.cost:.0f} level)")
     else:
         close = [e for e in rivals if _angle_between(e.c, best.c) >= p.ambiguity_tilt
                  and e.cost - best.cost < p.ambiguity_gain]
@@ -442,7 +472,7 @@ def relevel(record: ScanRecord, *, first: Localization | None = None,
                   f"{math.degrees(sigma[0]):.1f} deg in roll, +-{math.degrees(sigma[1]):.1f} "
                   "deg in pitch")
     pose = Pose(best.pose.x, best.pose.y, math.remainder(best.pose.yaw, 2.0 * math.pi))
-    return _result(record, best.c, found, reason, pose, best.cost, level_best.cost,
+    return _result(record, best.c, found, reason, pose, best.cost, level_total.cost,
                    best.floor, best.explained, sigma)
 
 
