@@ -89,7 +89,10 @@ def run(settings: Settings, workdir: Path) -> dict[str, Any]:
     tilted: list[tuple[ScanRecord, PosePrior]] = []
     for k in range(max(8, tilted_n)):
         world = MarteWorld.seeded(k)
-        world.place(rng.uniform(1.5, 5.8), rng.uniform(1.0, 2.9), rng.uniform(-180, 180))
+        while True:  # not on a rock: a leaning chassis makes any scan look tilted
+            world.place(rng.uniform(1.5, 5.8), rng.uniform(1.0, 2.9), rng.uniform(-180, 180))
+            if max(abs(world.roll), abs(world.pitch)) < math.radians(3.0):
+                break
         view = LidarView.of(world)
         cov = np.diag((0.05 ** 2, 0.05 ** 2, math.radians(2.0) ** 2))
         tracked.append((_record(world, view), PosePrior(Pose(world.x + 0.02, world.y - 0.02,
