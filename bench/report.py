@@ -236,6 +236,23 @@ def render(doc: dict[str, Any]) -> str:
                 f"position error {acc['worst_position_cm']} cm, worst diameter error "
                 f"{acc['worst_diameter_cm']} cm, {acc['false_per_layout']} false obstacles "
                 "per layout.", ""]
+    pc = doc.get("perception")
+    if pc and "error" not in pc:
+        f = pc["flow"]
+        out += [f"**perception** (the integrated chain on the rig, {pc['layouts']} layouts from "
+                "the start region facing the obstacle region; baselines: a least-squares line "
+                "through the fused scan, `world.step` alone for the sweep's simulated time, a "
+                "least-squares plane through the sweep's cloud)", "", HEAD]
+        out += _pcts("one localization (10 scans fused)", pc["localize_ms"], " ms",
+                     ("p50", "max"))
+        out += _pcts(f"one 3D scan ({pc['sweep_scans']} tilts), CPU with the simulator",
+                     pc["sweep"]["cpu_s"], " s", ("p50", "max"))
+        out += _pcts(f"merge + detection ({pc['cloud_points']:,} points)", pc["detect_ms"],
+                     " ms", ("p50", "max"))
+        out += ["", f"The sweep takes {pc['sweep']['simulated_s']['p50']} s of gimbal and "
+                f"LIDAR time; one whole `ramp sim perceive` flow is {f['simulated_s']} "
+                f"simulated s for {f['cpu_s']} s of CPU, of which the localizer "
+                f"{f['localize_cpu_s']} s and the detector {f['detect_cpu_s']} s.", ""]
     return "\n".join(out)
 
 
