@@ -29,16 +29,23 @@ API (arena frame of SPEC 6.1, metres and radians, `confidence` in 0..1)::
     detect_obstacles(records, pose) -> list[Obstacle]
         Rocks and craters from the records of a 3D sweep taken standing at `pose` (any object
         with x, y, yaw). `detect(records, pose)` gives the whole `obstacles.Detection`.
-    plan_scan(config, pose=None, *, ahead_m=None) -> SweepPlan | None
-        The 3D sweep's tilts (`cloud.plan_sweep`): ground lines every `sweep_spacing_m` from
-        as far as the obstacle region ends (+0.3 m) when the robot faces it, else up to
-        `sweep_far_m`, never beyond the wall ahead (from `pose`, or `ahead_m` measured by
-        `free_ahead`); None when there is no ground to scan ahead. Run it with `sweep.Sweep`.
+    plan_scan(config, pose=None, *, ahead_m=None, pan_deg=0.0) -> SweepPlan | None
+        The 3D sweep's tilts (`cloud.plan_sweep`), along the heading turned by `pan_deg`:
+        ground lines every `sweep_spacing_m` from as far as the obstacle region ends
+        (+0.3 m) when that direction faces it, else up to `sweep_far_m`, never beyond the
+        wall there (from `pose`, or from `ahead_m` that `free_ahead` measured when lost);
+        the steepest tilt 5 deg inside the servo's travel. None when there is no ground to
+        scan. Run it with `sweep.Sweep(leveller, collector, pan_tilt, plan, ahrs=ahrs)`.
     level_from_floor(records) -> LevelHint | None
-        Where level is, from the floor the sweep saw (a RANSAC plane): what a shifted IMU
-        mount hides from the walls. None when the records show too little floor.
-    free_ahead(records) -> float          the nearest return straight ahead of the footprint
-                                          centre in a level scan, m (inf when none)
+        Where level is, from the floor a sweep saw (a RANSAC plane over 1.5 m or more in
+        every direction): what a shifted IMU mount hides from the walls. None when the
+        records show too little floor (a wall close ahead: sweep panned to the sides too).
+    free_ahead(records, bearing_deg=0.0) -> float   how far from the footprint centre, along
+        a bearing of the chassis, a level scan meets something, m (inf when nothing)
+    fuse_scans(records) -> (ScanRecord, n)   the records of the last one's view, one median
+        range per beam (what `localize` and the tracker localize)
+    HIGH_CONFIDENCE (0.5): every pose reported has at least this confidence;
+    FLOOR_ADOPT_DEG (1.5): a floor this far from the AHRS' level means the IMU moved.
 
     Localization: pose (PoseEstimate | None; None exactly when lost), lost, candidates
         (PoseEstimate, best first: every pose the symmetric arena allows, as thesis figure
@@ -51,15 +58,19 @@ API (arena frame of SPEC 6.1, metres and radians, `confidence` in 0..1)::
 
 How the mission uses it (what `ramp sim perceive` does, `ramp/simulation/perceive.py`):
 
-1. Level scans (`localize_scans` of them) -> `tracker.initialise(records, hint=box)` (or
-   `relocalize(records)` after a loss; `update(records)` while tracking).
-2. A `level` in the answer: `ahrs.level_hint(level.roll, level.pitch, level.weight, t=level.t)`
-   (the AHRS folds it into its mount correction, so the gimbal levels right again), wait for
-   the gimbal to settle, scan again, localize again (bounded tries).
-3. `plan_scan` -> `sweep.Sweep` -> `level_from_floor(sweep.records)`: when it disagrees
-   with the AHRS by more than `FLOOR_ADOPT_DEG`, the IMU has moved: hand it to the AHRS as in
-   2 and start again from 1 (a lost robot sweeps too: the floor is how it finds level).
-4. Not lost: `ahrs.correct_yaw(pose.yaw, pose.confidence)`, `detect_obstacles(sweep.records,
+1. Level scans (`localize_scans` of them, the gimbal settled at 0) ->
+   `tracker.initialise(records, hint=box)` at the start, `yaw_prior=ahrs.yaw` without a box;
+   `relocalize(records)` after a loss; `update(records)` while tracking.
+2. A `level` in the answer that disagrees with the AHRS (by its `hint_adopt_deg`):
+   `ahrs.level_hint(level.roll, level.pitch, level.weight, t=level.t)` (the AHRS folds it
+   into its mount correction, so the gimbal levels right again), wait for the gimbal to
+   settle, back to 1 (bounded tries: `max_relocalize_tries`).
+3. `plan_scan(config, pose)` (lost: `ahead_m=free_ahead(records)`) -> `sweep.Sweep`. If the
+   AHRS corrected its mount since the level scans (`ahrs.correction` changed: it caught the
+   IMU moving while parked), they are spoiled: back to 1.
+4. `level_from_floor(sweep.records)`; None (a wall ahead): sweep with `pan_deg` 90 and -90
+   too and try on all the records. Beyond `FLOOR_ADOPT_DEG` from the AHRS: as in 2.
+5. Not lost: `ahrs.correct_yaw(pose.yaw, pose.confidence)`, `detect_obstacles(sweep.records,
    pose)`. Lost: stop, and after the tries wait for the operator (SPEC 6.3).
 """
 
