@@ -63,6 +63,8 @@ class Case:
     confidence: float = 0.0
     reason: str = ""
     relevels: int = 0
+    level_from: str = ""  # where each level correction came from ("scan", "floor")
+    retakes: int = 0  # localized again after the AHRS caught its IMU moving
     fault_at_s: float | None = None
     required: int = 0  # obstacles of 15 cm or more
     found: int = 0  # of those, within the bounds and of the right kind
@@ -88,7 +90,8 @@ class Case:
 
 def _score(kind: str, seed: int, setup: str, world: MarteWorld, r: PerceiveResult) -> Case:
     case = Case(kind, seed, setup, r.lost, reason=r.localization.reason,
-                relevels=r.relevels, fault_at_s=r.fault_info.get("at_s"),
+                relevels=r.relevels, level_from=",".join(f.source for f in r.level_fixes),
+                retakes=r.retakes, fault_at_s=r.fault_info.get("at_s"),
                 cpu_localize_s=r.cpu_localize_s, cpu_detect_s=r.cpu_detect_s,
                 wall_s=r.wall_time_s)
     if r.pose is not None:
@@ -212,6 +215,9 @@ def summary(group: str, done: Iterable[Case]) -> dict[str, object]:
         "worst_position_cm": round(max((c.position_error_m for c in fixed), default=0) * 100, 2),
         "worst_yaw_deg": round(max((c.yaw_error_deg for c in fixed), default=0), 2),
         "relevelled": sum(c.relevels > 0 for c in done),
+        "relevelled_from_scan": sum("scan" in c.level_from for c in done),
+        "relevelled_from_floor": sum("floor" in c.level_from for c in done),
+        "retaken": sum(c.retakes > 0 for c in done),
         "cpu_localize_s_p50": round(sorted(c.cpu_localize_s for c in done)[len(done) // 2], 3),
     }
     if group == "start_box":
