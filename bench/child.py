@@ -7,8 +7,8 @@
   written to `--dump` as JSON when the process exits (after SIGTERM).
 - `select-loop`: the tick baseline, a bare absolute-deadline loop waiting in `select.select`,
   run beside the supervisor until told to stop.
-- `echo`: the round-trip baseline, a minimal `selectors` server answering every line with a
-  fixed response of the supervisor's size.
+- `bare-server`: the round-trip baseline, a minimal `select.select` server answering every
+  line with a fixed response of the supervisor's size.
 - `relay`: the wire baseline, a minimal TCP-line to Sabertooth-packet relay with a watchdog,
   writing through pyserial to the same pty the supervisor's driver would use.
 """
@@ -20,7 +20,6 @@ import json
 import math
 import re
 import select
-import selectors
 import signal
 import socket
 import sys
@@ -100,18 +99,20 @@ def select_loop(args: argparse.Namespace) -> int:
     return 0
 
 
-# -- echo (round-trip baseline) -----------------------------------------------------------------
-def echo(args: argparse.Namespace) -> int:
-    """Each complete line in is answered by one fixed line of `--size` bytes (with `\\n`)."""
+# -- bare server (round-trip baseline) ----------------------------------------------------------
+def bare_server(args: argparse.Namespace) -> int:
+    """Each complete line in is answered by one fixed line of `--size` bytes (with `\\n`).
+
+    The least a Python line server can do: one `select.select` over its sockets, `recv`,
+    count newlines, `send`. No parsing, no routing, no formatting, so the ratio against it is
+    what RAMP's own work costs per request."""
     answer = b"x" * (args.size - 1) + b"\n"
-    sel = selectors.DefaultSelector()
     server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     server.bind(("127.0.0.1", 0))
     server.listen(64)
     server.setblocking(False)
-    sel.register(server, selectors.EVENT_READ)
-    pending: dict[socket.socket, bytearray] = {}
+    out: dict[socket.socket, bytearray] = {}
     stop = False
 
     def on_term(signum: int, frame: object) -> None:
@@ -122,26 +123,16 @@ def echo(args: argparse.Namespace) -> int:
     print(f"ready on 127.0.0.1:{server.getsockname()[1]}", flush=True)
 
     def drop(sock: socket.socket) -> None:
-        sel.unregister(sock)
-        pending.pop(sock, None)
+        out.pop(sock, None)
         sock.close()
 
-    def flush(sock: socket.socket) -> None:
-        out = pending[sock]
-        try:
-            n = sock.send(out)
-        except BlockingIOError:
-            n = 0
-        except OSError:
-            drop(sock)
-            return
-        del out[:n]
-        sel.modify(sock, selectors.EVENT_READ | (selectors.EVENT_WRITE if out else 0))
-
     while not stop:
-        for key, events in sel.select(0.5):
-            sock = key.fileobj
-            assert isinstance(sock, socket.socket)
+        waiting = [s for s, buf in out.items() if buf]
+        try:
+            readable, writable, _ = select.select([server, *out], waiting, [], 0.5)
+        except InterruptedError:
+            continue
+        for sock in readable:
             if sock is server:
                 try:
                     conn, _ = server.accept()
@@ -149,22 +140,31 @@ def echo(args: argparse.Namespace) -> int:
                     continue
                 conn.setblocking(False)
                 conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                pending[conn] = bytearray()
-                sel.register(conn, selectors.EVENT_READ)
+                out[conn] = bytearray()
                 continue
-            if events & selectors.EVENT_READ:
-                try:
-                    data = sock.recv(65536)
-                except BlockingIOError:
-                    continue
-                except OSError:
-                    data = b""
-                if not data:
-                    drop(sock)
-                    continue
-                pending[sock] += answer * data.count(b"\n")
-            if sock in pending:
-                flush(sock)
+            try:
+                data = sock.recv(65536)
+            except BlockingIOError:
+                continue
+            except OSError:
+                data = b""
+            if not data:
+                drop(sock)
+                continue
+            out[sock] += answer * data.count(b"\n")
+            writable.append(sock)
+        for sock in writable:
+            buf = out.get(sock)
+            if not buf:
+                continue
+            try:
+                n = sock.send(buf)
+            except BlockingIOError:
+                continue
+            except OSError:
+                drop(sock)
+                continue
+            del buf[:n]
     return 0
 
 
@@ -280,9 +280,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p = sub.add_parser("select-loop")
     p.add_argument("--rate", type=float, required=True)
     p.set_defaults(func=select_loop)
-    p = sub.add_parser("echo")
+    p = sub.add_parser("bare-server")
     p.add_argument("--size", type=int, required=True)
-    p.set_defaults(func=echo)
+    p.set_defaults(func=bare_server)
     p = sub.add_parser("relay")
     p.add_argument("--port", required=True)
     p.add_argument("--baud", type=int, default=9600)

@@ -59,7 +59,9 @@ def render(doc: dict[str, Any]) -> str:
     r = doc.get("round_trip")
     if r and "error" not in r:
         out += [f"**round_trip** (`{r['request']}`, {r['response_bytes']}-byte answer; "
-                "baseline: minimal selectors server answering the same size)", "", HEAD]
+                "baseline: bare select server answering the same size; client and servers "
+                f"pinned to core {r.get('pinned_cpu', '?')}, median of "
+                f"{r.get('trials', 1)} trials)", "", HEAD]
         out += _pcts(f"sequential ×{r['sequential']['requests']:,}: RTT", r["sequential"]["rtt_us"],
                      " µs")
         pip = r["pipelined"]
