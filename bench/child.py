@@ -31,8 +31,8 @@ from pathlib import Path
 # -- supervisor ---------------------------------------------------------------------------------
 def supervisor(args: argparse.Namespace) -> int:
     import ramp.cli
+    import ramp.runtime.supervisor
     import ramp.scheduler
-    import ramp.supervisor
 
     samples: list[tuple[float, float, int]] = []
     bus_stats: dict[str, dict[str, int]] = {}
@@ -44,7 +44,7 @@ def supervisor(args: argparse.Namespace) -> int:
             samples.append((time.monotonic(), late_s * 1e6, self.overruns))
             super().record(late_s)
 
-    class ObservedSupervisor(ramp.supervisor.Supervisor):
+    class ObservedSupervisor(ramp.runtime.supervisor.Supervisor):
         """Copies the drivers' counters before shutdown (they are not exposed over MCP)."""
 
         def shutdown(self) -> None:
@@ -57,7 +57,7 @@ def supervisor(args: argparse.Namespace) -> int:
     # Both names are looked up when the objects are built, so the hooks are in place for the
     # unchanged `ramp run` code path below.
     ramp.scheduler.TickStats = RecordingTickStats  # type: ignore[misc]
-    ramp.supervisor.Supervisor = ObservedSupervisor  # type: ignore[misc]
+    ramp.runtime.supervisor.Supervisor = ObservedSupervisor  # type: ignore[misc]
     code = ramp.cli.main(["run", "--config", args.config, "--sim", "--host", "127.0.0.1",
                           "--port", "0", "--log-level", args.log_level])
     Path(args.dump).write_text(json.dumps({"exit": code, "samples": samples,

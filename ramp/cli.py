@@ -82,7 +82,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         if sim_buses:
             _print_errors(sim_buses)
             return EXIT_CONFIG
-    from ramp.server import ensure_fd_limit
+    from ramp.layers.server import ensure_fd_limit
 
     problem = ensure_fd_limit(config.server.max_clients, len(config.buses))
     if problem is not None:
@@ -95,14 +95,16 @@ def cmd_run(args: argparse.Namespace) -> int:
 def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | None) -> int:
     """Build, start and run until a stop signal; motors are stopped before returning."""
     from ramp.clock import MonotonicClock
-    from ramp.supervisor import Supervisor
-    from ramp.systemd import SystemdNotifier
+    from ramp.runtime.supervisor import Supervisor
+    from ramp.runtime.systemd import SystemdNotifier
 
     clock = MonotonicClock()
     backplane = None
     try:  # building drivers and modules checks what the config check cannot see
         if sim:
-            from ramp.sim import SimBackplane  # the one place ramp/ reaches firmware_like/
+            from ramp.simulation.backplane import (
+                SimBackplane,  # the one place ramp/ reaches firmware_like/
+            )
 
             backplane = SimBackplane(config)
             sup = Supervisor(config, clock, bus_factory=backplane.bus_factory, host=host,

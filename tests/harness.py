@@ -20,7 +20,7 @@ from ramp.clock import VirtualClock
 from ramp.config import BusConfig, Config, parse_config
 from ramp.hal.interfaces import Bus
 from ramp.hal.simio import SimBus
-from ramp.supervisor import Supervisor
+from ramp.runtime.supervisor import Supervisor
 
 
 class FakeWorld:
@@ -153,12 +153,13 @@ MARTE_YAML = (REPO / "ramp.yaml").read_text()
 
 
 class SimHarness(Harness):
-    """The MARTE config on the physics model through `ramp.sim.SimBackplane`, as `--sim`."""
+    """The MARTE config on the physics model through the `--sim` backplane
+    (`ramp.simulation.backplane.SimBackplane`)."""
 
     def __init__(self, yaml_text: str = MARTE_YAML, wire_level: bool = True,
                  seed: int = 0) -> None:
         from firmware_like.marte import MarteWorld
-        from ramp.sim import SimBackplane
+        from ramp.simulation.backplane import SimBackplane
 
         self.clock = VirtualClock()
         self.config = config_from(yaml_text.replace("port: 5577", "port: 0"))

@@ -16,7 +16,7 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from ramp.layers.robot import Client
+from ramp.layers.robot_distribution import Client
 from ramp.mcp.messages import Response, clean_detail
 from ramp.mcp.protocol import (
     LineSplitter,

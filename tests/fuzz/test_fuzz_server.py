@@ -24,7 +24,7 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from ramp.layers.module import Property
+from ramp.layers.module_distribution import Property
 from ramp.mcp.protocol import parse_response_line
 from tests.fuzz import (
     DemoOracle,

@@ -19,7 +19,7 @@ import pytest
 from ramp.clock import MonotonicClock
 from ramp.errors import DeviceError
 from ramp.hal.simio import SimBus
-from ramp.supervisor import Supervisor
+from ramp.runtime.supervisor import Supervisor
 from tests.harness import DEMO_YAML, MARTE_YAML, FakeWorld, config_from
 from tests.harness import ask_line as ask
 from tests.harness import start_ramp as start
@@ -77,9 +77,9 @@ def serve_for(sup: Supervisor, seconds: float, sock: socket.socket) -> list[floa
 @pytest.mark.timeout(30)
 def test_a_hanging_open_and_reopen_leave_the_loop_and_other_modules_alone(
         monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
-    import ramp.bus_opener
+    import ramp.runtime.bus_opener
 
-    monkeypatch.setattr(ramp.bus_opener, "HANG_S", 0.3)
+    monkeypatch.setattr(ramp.runtime.bus_opener, "HANG_S", 0.3)
     world = FakeWorld()
     hanging: dict[str, HangingBus] = {}
 

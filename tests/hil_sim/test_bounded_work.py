@@ -20,7 +20,7 @@ import pytest
 
 from ramp.clock import VirtualClock
 from ramp.hal.simio import SimBus
-from ramp.supervisor import Supervisor
+from ramp.runtime.supervisor import Supervisor
 from tests.harness import DEMO_YAML, FakeWorld, config_from
 
 #: Every request costs at least this much: a line of them takes 15-25 ms, two 10 ms ticks.

@@ -22,8 +22,8 @@ import pytest
 
 from ramp.clock import MonotonicClock, VirtualClock
 from ramp.hal.simio import SimBus
+from ramp.runtime.supervisor import Supervisor
 from ramp.scheduler import Scheduler
-from ramp.supervisor import Supervisor
 from tests.harness import DEMO_YAML, MARTE_YAML, REPO, FakeWorld, config_from
 from tests.harness import ask_line as ask
 

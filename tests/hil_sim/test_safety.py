@@ -15,8 +15,8 @@ from firmware_like.pty_link import PtyLink
 from firmware_like.sabertooth import SabertoothEmulator, SabertoothPtyDevice
 from ramp.clock import MonotonicClock
 from ramp.hal.simio import SimBus
-from ramp.stall_guard import StallGuard
-from ramp.supervisor import Supervisor
+from ramp.runtime.stall_guard import StallGuard
+from ramp.runtime.supervisor import Supervisor
 from tests.harness import DEMO_YAML, MARTE_YAML, FakeWorld, config_from
 from tests.harness import ask_line as ask
 from tests.harness import start_ramp as start

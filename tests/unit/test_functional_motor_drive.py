@@ -8,9 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ramp.functional import BaseDrive, BucketLadder, Motor, mix
-from ramp.functional.base_drive import round_half_away
 from ramp.hal.interfaces import MotorChannel
+from ramp.layers.functional import BaseDrive, BucketLadder, Motor, mix
+from ramp.layers.functional.base_drive import round_half_away
 
 
 class FakeMotor(MotorChannel):

@@ -14,7 +14,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from ramp.supervisor import Supervisor
+    from ramp.runtime.supervisor import Supervisor
 
 log = logging.getLogger("ramp.systemd")
 

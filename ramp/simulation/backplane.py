@@ -24,10 +24,10 @@ from firmware_like.marte import MarteWorld
 from ramp.config import BusConfig, Config
 from ramp.hal.interfaces import Bus
 from ramp.hal.simio import SimBus
-from ramp.supervisor import default_bus_factory
+from ramp.runtime.supervisor import default_bus_factory
 
 if TYPE_CHECKING:
-    from ramp.supervisor import Supervisor
+    from ramp.runtime.supervisor import Supervisor
 
 log = logging.getLogger("ramp.sim")
 

@@ -1,7 +1,7 @@
 """Tab completion and parameter hints for `ramp-shell`: pure functions over a Catalog.
 
 Completion looks only at the text before the cursor and at what the robot described, so it
-is tested with strings; the prompt_toolkit adapter in `ramp.shell` only converts the result.
+is tested with strings; the prompt_toolkit adapter in `ramp.shell.cli` only converts the result.
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from ramp.shell_render import READ_FUNCTIONS, Catalog, FunctionInfo
+from ramp.shell.render import READ_FUNCTIONS, Catalog, FunctionInfo
 
 #: Shell commands and what the completion menu says about them.
 SHELL_COMMANDS: dict[str, str] = {

@@ -11,21 +11,21 @@ import logging
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
-from ramp.bus_opener import BusOpener
 from ramp.clock import Clock, MonotonicClock
 from ramp.config import BusConfig, Config
 from ramp.errors import DeviceError
 from ramp.hal import driver_class
 from ramp.hal.interfaces import Bus
-from ramp.layers.module import BoundDevice, Module
-from ramp.layers.registry import module_class
-from ramp.layers.robot import Health, ModuleSlot, RobotDistribution
-from ramp.layers.watchdog import Watchdog
+from ramp.layers.module_distribution import BoundDevice, Module
+from ramp.layers.robot_distribution import Health, ModuleSlot, RobotDistribution
+from ramp.layers.robot_distribution.watchdog import Watchdog
+from ramp.layers.server import Connection, McpServer
 from ramp.mcp.messages import Response
 from ramp.mcp.protocol import TooLong, parse_message, too_long_response
+from ramp.modules import module_class
+from ramp.runtime.bus_opener import BusOpener
+from ramp.runtime.stall_guard import StallGuard
 from ramp.scheduler import Scheduler
-from ramp.server import Connection, McpServer
-from ramp.stall_guard import StallGuard
 
 log = logging.getLogger("ramp.supervisor")
 
@@ -198,9 +198,10 @@ class Supervisor:
 
     # -- buses and attachment -----------------------------------------------------------------
     def _try_open(self, name: str, bus: Bus, now: float, quiet: bool = False) -> bool:
-        """Open a bus without holding the loop (see `ramp.bus_opener`); True once it is open.
-        A failure waits RETRY_PERIOD before the next try; an open still running is looked at
-        again on the next tick. `quiet`: start it and do not wait (the others start too)."""
+        """Open a bus without holding the loop (see `ramp.runtime.bus_opener`); True once it
+        is open. A failure waits RETRY_PERIOD before the next try; an open still running is
+        looked at again on the next tick. `quiet`: start it and do not wait (the others start
+        too)."""
         if quiet and not self.opener.inline:
             self.opener.open(name, bus, now)
             return False

@@ -5,7 +5,7 @@ Requests and get rows are thesis tables 5.5 and 5.6 (SPEC 2.1) plus two extensio
 the lift's stall fault is latched). YAML settings block `lift`: `tolerance` (hold band,
 default 0.03), `hysteresis` (a move stops this close to its target, default 0.01),
 `stall_time` (s, default 1.5) and `stall_min_change` (least progress at full speed within
-`stall_time`, default 0.01); see ramp.functional.thompson_actuator.
+`stall_time`, default 0.01); see ramp.layers.functional.thompson_actuator.
 """
 
 from __future__ import annotations
@@ -14,7 +14,8 @@ from collections.abc import Mapping
 from typing import Any, ClassVar
 
 from ramp.errors import ConfigError
-from ramp.functional import (
+from ramp.hal.interfaces import AnalogInput, BridgeInput, MotorChannel
+from ramp.layers.functional import (
     LIFT_FIELDS,
     LOAD_CELL_FIELDS,
     MOTOR_FIELDS,
@@ -26,8 +27,7 @@ from ramp.functional import (
     block,
     channel,
 )
-from ramp.hal.interfaces import AnalogInput, BridgeInput, MotorChannel
-from ramp.layers.module import DeviceSpec, Function, Module, Property, Task
+from ramp.layers.module_distribution import DeviceSpec, Function, Module, Property, Task
 from ramp.mcp.params import FloatParam, IntParam
 from ramp.schema import Field
 

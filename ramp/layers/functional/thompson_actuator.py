@@ -23,8 +23,8 @@ from collections.abc import Mapping
 from typing import Any, Literal
 
 from ramp.errors import RequestError
-from ramp.functional.motor import Motor
 from ramp.hal.interfaces import AnalogInput
+from ramp.layers.functional.motor import Motor
 from ramp.schema import Field
 
 #: YAML keys of the lift's feedback pot (required: every actuator's pot sits differently).

@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from ramp.errors import DeviceError, RequestError
-from ramp.layers.control import Control
-from ramp.layers.module import Function, Module
-from ramp.layers.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S, Watchdog
+from ramp.layers.module_distribution import Function, Module
+from ramp.layers.robot_distribution.control import Control
+from ramp.layers.robot_distribution.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S, Watchdog
 from ramp.mcp.messages import Request, Response, Value, error_response
 from ramp.mcp.params import FloatParam, NameParam
 

@@ -19,7 +19,7 @@ import socket
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 
-from ramp.layers.robot import Client
+from ramp.layers.robot_distribution import Client
 from ramp.mcp.messages import Response, error_response
 from ramp.mcp.protocol import LineSplitter, TooLong, format_response
 from ramp.scheduler import Scheduler

@@ -4,7 +4,7 @@ Requests and get rows are exactly thesis tables 5.3 and 5.4 (SPEC 2.1). YAML set
 
 - `battery_filter`: `time_constant` (s, default 2.0) of the low-pass on `battery.volt`;
 - `voltage_display`: the five thresholds, `blink_hz` and `hysteresis` of the three-LED battery
-  display (sequence documented in ramp.functional.voltage_display).
+  display (sequence documented in ramp.layers.functional.voltage_display).
 """
 
 from __future__ import annotations
@@ -13,7 +13,8 @@ from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
 from ramp.errors import ConfigError
-from ramp.functional import (
+from ramp.hal.interfaces import AnalogInput, DigitalInput, DigitalOutput, MotorChannel
+from ramp.layers.functional import (
     BATTERY_FIELDS,
     BUTTON_FIELDS,
     DISPLAY_FIELDS,
@@ -29,8 +30,7 @@ from ramp.functional import (
     block,
     channel,
 )
-from ramp.hal.interfaces import AnalogInput, DigitalInput, DigitalOutput, MotorChannel
-from ramp.layers.module import DeviceSpec, Function, Module, Property, Task
+from ramp.layers.module_distribution import DeviceSpec, Function, Module, Property, Task
 from ramp.mcp.messages import Value
 from ramp.mcp.params import FlagParam, FloatParam, IntParam
 from ramp.schema import Field

@@ -27,7 +27,7 @@ import time
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from ramp.supervisor import Supervisor
+    from ramp.runtime.supervisor import Supervisor
 
 log = logging.getLogger("ramp.stall")
 

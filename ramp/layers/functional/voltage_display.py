@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from ramp.functional.led import Led
+from ramp.layers.functional.led import Led
 from ramp.schema import Field
 
 #: Settings block `voltage_display`: thresholds in rail volts (descending), blink rate, band.

@@ -29,8 +29,8 @@ from ramp.errors import ProtocolError
 from ramp.mcp.client import DEFAULT_PORT, McpClient, parse_address
 from ramp.mcp.messages import Request, Response
 from ramp.mcp.protocol import format_requests, parse_message, parse_response_line
-from ramp.shell_complete import complete, param_hint, split_command
-from ramp.shell_render import (
+from ramp.shell.complete import complete, param_hint, split_command
+from ramp.shell.render import (
     READ_FUNCTIONS,
     Catalog,
     build_catalog,

@@ -12,15 +12,15 @@ from collections.abc import Mapping
 from typing import Any
 
 from ramp.errors import ConfigError
-from ramp.functional.base_drive import BaseDrive, mix
-from ramp.functional.bucket_ladder import BucketLadder
-from ramp.functional.button import BUTTON_FIELDS, Button
-from ramp.functional.led import Led
-from ramp.functional.load_cell import LOAD_CELL_FIELDS, LoadCell
-from ramp.functional.motor import MOTOR_FIELDS, Motor
-from ramp.functional.thompson_actuator import LIFT_FIELDS, POT_FIELDS, ThompsonActuator
-from ramp.functional.voltage import BATTERY_FIELDS, FILTER_FIELDS, SystemVoltage, Voltage
-from ramp.functional.voltage_display import DISPLAY_FIELDS, VoltageDisplay
+from ramp.layers.functional.base_drive import BaseDrive, mix
+from ramp.layers.functional.bucket_ladder import BucketLadder
+from ramp.layers.functional.button import BUTTON_FIELDS, Button
+from ramp.layers.functional.led import Led
+from ramp.layers.functional.load_cell import LOAD_CELL_FIELDS, LoadCell
+from ramp.layers.functional.motor import MOTOR_FIELDS, Motor
+from ramp.layers.functional.thompson_actuator import LIFT_FIELDS, POT_FIELDS, ThompsonActuator
+from ramp.layers.functional.voltage import BATTERY_FIELDS, FILTER_FIELDS, SystemVoltage, Voltage
+from ramp.layers.functional.voltage_display import DISPLAY_FIELDS, VoltageDisplay
 from ramp.schema import Field
 
 __all__ = [

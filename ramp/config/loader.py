@@ -27,9 +27,9 @@ import yaml
 from ramp.errors import ConfigError, ConfigErrors
 from ramp.hal import driver_class
 from ramp.hal.interfaces import Bus
-from ramp.layers.module import Module
-from ramp.layers.registry import module_class
-from ramp.layers.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S
+from ramp.layers.module_distribution import Module
+from ramp.layers.robot_distribution.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S
+from ramp.modules import module_class
 from ramp.schema import Field, FieldError, apply_fields, shorten
 
 #: A config file is a few kB; anything past this is refused before parsing.
@@ -524,7 +524,7 @@ def _dry_build(c: _Checker, mod: ModuleConfig, cls: Any, entry: MarkedMap) -> No
     """Build the module on null channels so checks that span several keys (thresholds in
     order, calibration points apart) are reported by `ramp check` with their line."""
     from ramp.hal.simio import SimBus
-    from ramp.layers.module import BoundDevice
+    from ramp.layers.module_distribution import BoundDevice
 
     bus = SimBus("check", {}, world=_NullWorld())
     devices = {dev: BoundDevice(bus.channel(dc.kind, f"{mod.name}.{dev}", {}), dc.params)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
-from ramp.layers.module import BoundDevice, DeviceSpec, Function, Module, Property
+from ramp.layers.module_distribution import BoundDevice, DeviceSpec, Function, Module, Property
 from ramp.mcp.params import FlagParam, IntParam
 from ramp.schema import Field
 

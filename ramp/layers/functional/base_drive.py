@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from ramp.functional.motor import Motor
+from ramp.layers.functional.motor import Motor
 
 
 def round_half_away(x: float) -> int:

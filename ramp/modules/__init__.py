@@ -6,9 +6,9 @@ import importlib
 from typing import Any
 
 MODULE_TYPES: dict[str, tuple[str, str]] = {
-    "base": ("ramp.layers.base", "BaseModule"),
-    "ble": ("ramp.layers.ble", "BleModule"),
-    "demo": ("ramp.layers.demo", "DemoModule"),
+    "base": ("ramp.modules.base", "BaseModule"),
+    "ble": ("ramp.modules.ble", "BleModule"),
+    "demo": ("ramp.modules.demo", "DemoModule"),
 }
 
 
