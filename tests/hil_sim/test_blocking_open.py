@@ -70,7 +70,11 @@ def serve_for(sup: Supervisor, seconds: float, sock: socket.socket) -> list[floa
     th.start()
     sup.scheduler.run_for(seconds)
     stop.set()
-    th.join(5)
+    # The client may have just sent a request: keep serving until it has its answer, or it
+    # waits out its socket timeout and the next run of the loop sees a 5 s stall.
+    deadline = time.monotonic() + 5
+    while th.is_alive() and time.monotonic() < deadline:
+        sup.scheduler.run_for(0.01)
     return rtts
 
 
