@@ -1,10 +1,9 @@
 """Processes the benchmarks start: `python -m bench.child NAME ...`.
 
-- `supervisor`: exactly `ramp run --sim` (it calls `ramp.cli.main`), plus two observation
-  hooks installed from outside, so no file in ramp/ changes: the scheduler's `TickStats` is
-  replaced by a subclass that also keeps every lateness sample with its time, and the
-  Supervisor by a subclass that copies each driver's `stats` just before shutdown. Both are
-  written to `--dump` as JSON when the process exits (after SIGTERM).
+- `supervisor`: exactly `ramp run --sim` (it calls `ramp.cli.main`; `--real` leaves out
+  `--sim`) with an observer (`ramp.runtime.Observer`) that keeps every tick's lateness with
+  its time and, at shutdown, each driver's `stats` and each task's cost; all of it is written
+  to `--dump` as JSON when the process exits (after SIGTERM).
 - `select-loop`: the tick baseline, a bare absolute-deadline loop waiting in `select.select`,
   run beside the supervisor until told to stop.
 - `bare-server`: the round-trip baseline, a minimal `select.select` server answering every
@@ -30,38 +29,41 @@ from pathlib import Path
 
 # -- supervisor ---------------------------------------------------------------------------------
 def supervisor(args: argparse.Namespace) -> int:
+    """`ramp run --sim` (through `ramp.cli.main`), watched by an observer: the runtime's own
+    hook points (`ramp.runtime.observers`), nothing replaced from outside."""
     import ramp.cli
-    import ramp.runtime.supervisor
-    import ramp.scheduler
+    from ramp.runtime import Observer, Supervisor
 
     samples: list[tuple[float, float, int]] = []
-    bus_stats: dict[str, dict[str, int]] = {}
+    at_exit: dict[str, object] = {}
 
-    class RecordingTickStats(ramp.scheduler.TickStats):
-        """Keeps (time, lateness µs, overruns so far) of every tick, not just a window."""
+    class BenchObserver(Observer):
+        """Every tick's lateness with its time; at shutdown, the drivers' counters and what
+        each task cost (neither is exposed over MCP)."""
 
-        def record(self, late_s: float) -> None:
-            samples.append((time.monotonic(), late_s * 1e6, self.overruns))
-            super().record(late_s)
+        sup: Supervisor | None = None
 
-    class ObservedSupervisor(ramp.runtime.supervisor.Supervisor):
-        """Copies the drivers' counters before shutdown (they are not exposed over MCP)."""
+        def started(self, supervisor: Supervisor) -> None:
+            self.sup = supervisor
 
-        def shutdown(self) -> None:
-            for name, bus in self.buses.items():
-                stats = getattr(bus, "stats", None)
-                if isinstance(stats, dict):
-                    bus_stats[name] = dict(stats)
-            super().shutdown()
+        def tick(self, t: float, late_s: float) -> None:
+            overruns = self.sup.scheduler.stats.overruns if self.sup is not None else 0
+            samples.append((time.monotonic(), late_s * 1e6, overruns))
 
-    # Both names are looked up when the objects are built, so the hooks are in place for the
-    # unchanged `ramp run` code path below.
-    ramp.scheduler.TickStats = RecordingTickStats  # type: ignore[misc]
-    ramp.runtime.supervisor.Supervisor = ObservedSupervisor  # type: ignore[misc]
-    code = ramp.cli.main(["run", "--config", args.config, "--sim", "--host", "127.0.0.1",
-                          "--port", "0", "--log-level", args.log_level])
-    Path(args.dump).write_text(json.dumps({"exit": code, "samples": samples,
-                                           "bus_stats": bus_stats}))
+        def stopping(self, supervisor: Supervisor) -> None:
+            at_exit["bus_stats"] = {name: dict(bus.stats) for name, bus in
+                                    supervisor.buses.items()
+                                    if isinstance(getattr(bus, "stats", None), dict)}
+            at_exit["tasks"] = {t.name: {"runs": t.runs, "total_s": t.total_s, "max_s": t.max_s}
+                                for t in supervisor.scheduler.tasks}
+            at_exit["ticks"] = supervisor.scheduler.stats.ticks
+
+    argv = ["run", "--config", args.config, "--host", "127.0.0.1", "--port", "0",
+            "--log-level", args.log_level]
+    if not args.real:
+        argv.append("--sim")
+    code = ramp.cli.main(argv, observer=BenchObserver())
+    Path(args.dump).write_text(json.dumps({"exit": code, "samples": samples, **at_exit}))
     return code
 
 
@@ -276,6 +278,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--config", required=True)
     p.add_argument("--dump", required=True)
     p.add_argument("--log-level", default="warning")
+    p.add_argument("--real", action="store_true", help="real drivers: no --sim")
     p.set_defaults(func=supervisor)
     p = sub.add_parser("select-loop")
     p.add_argument("--rate", type=float, required=True)

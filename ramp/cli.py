@@ -9,10 +9,14 @@ import signal
 import sys
 from collections.abc import Sequence
 from types import FrameType
+from typing import TYPE_CHECKING
 
 from ramp import __version__
 from ramp.config import Config, check_config, valid_host
 from ramp.errors import ConfigError, RampError
+
+if TYPE_CHECKING:
+    from ramp.runtime.observers import Observer
 
 log = logging.getLogger("ramp")
 
@@ -89,13 +93,16 @@ def cmd_run(args: argparse.Namespace) -> int:
         _print_errors([ConfigError(problem, file=config.file, key="server.max_clients",
                                    line=config.lines.get("server.max_clients", 0))])
         return EXIT_CONFIG
-    return run_supervisor(config, sim=args.sim, host=args.host, port=args.port)
+    return run_supervisor(config, sim=args.sim, host=args.host, port=args.port,
+                          observer=getattr(args, "observer", None))
 
 
-def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | None) -> int:
-    """Build, start and run until a stop signal; motors are stopped before returning."""
+def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | None,
+                   observer: Observer | None = None) -> int:
+    """Build, start and run until a stop signal; motors are stopped before returning.
+    `observer` (see `ramp.runtime.observers`) watches the running supervisor."""
     from ramp.clock import MonotonicClock
-    from ramp.runtime.supervisor import Supervisor
+    from ramp.runtime import build
     from ramp.runtime.systemd import SystemdNotifier
 
     clock = MonotonicClock()
@@ -107,11 +114,11 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
             )
 
             backplane = SimBackplane(config)
-            sup = Supervisor(config, clock, bus_factory=backplane.bus_factory, host=host,
-                             port=port)
+            sup = build(config, clock, backplane.bus_factory, host=host, port=port,
+                        observer=observer)
             backplane.attach(sup)
         else:
-            sup = Supervisor(config, clock, host=host, port=port)
+            sup = build(config, clock, host=host, port=port, observer=observer)
     except Exception as exc:  # noqa: BLE001 - nothing is open yet; say what and leave
         if backplane is not None:
             backplane.close()
@@ -211,8 +218,10 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None, observer: Observer | None = None) -> int:
+    """`ramp ...`; `observer` watches the supervisor of `ramp run` (the benchmarks use it)."""
     args = build_parser().parse_args(argv)
+    args.observer = observer
     code: int = args.func(args)
     return code
 

@@ -49,6 +49,8 @@ TaskFn = Callable[[float, float], None]
 IoCallback = Callable[[], None]
 #: Called with (gap in s, the unit of work during which the time went) when the loop stalled.
 StallHandler = Callable[[float, str], None]
+#: Called with (now, how late the tick started, s) as each tick starts.
+TickHook = Callable[[float, float], None]
 #: The unit of work a gap is blamed on when it fell between ticks.
 WAIT = "the wait between ticks"
 
@@ -131,6 +133,8 @@ class Scheduler:
         self.stall_limit = max(stall_limit, 2 * self.period)
         #: Set by the owner (the supervisor): stops every module. None: stalls are not checked.
         self.on_stall: StallHandler | None = None
+        #: Observer hook: (now, lateness in s) as every tick starts. None costs nothing.
+        self.on_tick: TickHook | None = None
         self.stalls = 0
         self._beat: float | None = None  # clock time the last tick started
         self._unit = WAIT  # the unit of work in progress (or last begun)
@@ -366,6 +370,8 @@ class Scheduler:
         self._beat = now
         late = max(0.0, now - deadline)
         self.stats.record(late)
+        if self.on_tick is not None:
+            self.on_tick(now, late)
         missed = int(late // self.period)
         worst_name, worst_s = "", 0.0
         for task in list(self.tasks):

@@ -2,8 +2,11 @@
 
 Every error names the file, the line, the key path and what was expected, and all of them
 are collected in one pass so `ramp check` can show a team everything to fix at once.
-Drivers and modules declare their own keys (`Bus.fields`, `Bus.channel_fields`,
-`Module.devices`, `Module.settings`); this loader only walks the tree and applies them.
+Drivers and modules declare their own keys and the rules spanning them (`Bus.fields`,
+`Bus.channel_fields`, `Module.devices`, `Module.settings`); this loader only walks the tree
+and runs the one block check (`ramp.schema.validate`) on each. It produces data and builds
+nothing: drivers and modules are built from that data by `ramp.runtime.build`, so `ramp
+check` touches no hardware and runs no module code.
 
 Hostile or broken files end in such an error too, never in a traceback or a hang: the file
 is at most `MAX_FILE_BYTES` of UTF-8, nesting is capped at `MAX_DEPTH` and alias expansion
@@ -30,7 +33,7 @@ from ramp.hal.interfaces import Bus
 from ramp.layers.module_distribution import Module
 from ramp.layers.robot_distribution.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S
 from ramp.modules import module_class
-from ramp.schema import Field, FieldError, apply_fields, shorten
+from ramp.schema import Block, Field, shorten, validate
 
 #: A config file is a few kB; anything past this is refused before parsing.
 MAX_FILE_BYTES = 1 << 20
@@ -219,7 +222,7 @@ class _Checker:
         self.errors.append(ConfigError(shorten(message, 300), file=self.file, line=line,
                                        key=shorten(key, 120)))
 
-    def block(self, parent: MarkedMap, key: str, path: str, fields: dict[str, Field],
+    def block(self, parent: MarkedMap, key: str, path: str, fields: Mapping[str, Field],
               skip: set[str] | frozenset[str] = frozenset()) -> dict[str, Any]:
         """Check the mapping `parent[key]` against `fields`; returns values (defaults on error)."""
         raw = parent.get(key)
@@ -232,27 +235,17 @@ class _Checker:
             return {k: f.default for k, f in fields.items() if not f.required}
         return self.values(raw, path, fields, skip)
 
-    def values(self, raw: dict[Any, Any], path: str, fields: dict[str, Field],
+    def values(self, raw: dict[Any, Any], path: str, fields: Mapping[str, Field],
                skip: set[str] | frozenset[str] = frozenset()) -> dict[str, Any]:
-        lines = getattr(raw, "lines", {})
+        """`ramp.schema.validate` on one block, each problem at its key's line (a rule
+        spanning the block at the block's own line)."""
         here = getattr(raw, "line", 0)
+        lines = {str(k): v for k, v in getattr(raw, "lines", {}).items()}
         for dup, dline in getattr(raw, "duplicates", []):
             self.err(f"{path}.{dup}", dline, "key given twice")
-        out: dict[str, Any] = {}
-        data = {k: v for k, v in raw.items() if k not in skip}
-        # Check key by key so that every bad key is reported, not just the first.
-        for k in data:
-            if k not in fields:
-                known = ", ".join(sorted([*fields, *skip])) or "none"
-                self.err(f"{path}.{k}", lines.get(k, here),
-                         f"unknown key (expected one of: {known})")
-        for k, f in fields.items():
-            try:
-                out.update(apply_fields({k: f}, {k: data[k]} if k in data else {}))
-            except FieldError as exc:
-                self.err(f"{path}.{exc.key}", lines.get(exc.key, here), exc.message)
-                if not f.required:
-                    out[k] = f.default
+        out, problems = validate(fields, raw, skip)
+        for key, message in problems:
+            self.err(f"{path}.{key}" if key else path, lines.get(key, here), message)
         return out
 
 
@@ -492,50 +485,8 @@ def _modules(c: _Checker, root: MarkedMap, buses: dict[str, BusConfig],
             continue
         mod = _module(c, path, str(name), str(type_name), cls, entry, buses, bus_classes, used)
         if mod is not None:
-            if len(mod.devices) == len(cls.devices):
-                _dry_build(c, mod, cls, entry)
             out[str(name)] = mod
     return out
-
-
-class _NullWorld:
-    """Reads zeros and ignores writes: lets `ramp check` build modules without hardware."""
-
-    def set_motor(self, name: str, duty: float) -> None:
-        pass
-
-    def read_analog(self, name: str) -> float:
-        return 0.0
-
-    def read_digital(self, name: str) -> bool:
-        return False
-
-    def write_digital(self, name: str, on: bool) -> None:
-        pass
-
-    def read_bridge(self, name: str) -> float:
-        return 0.0
-
-    def bus_present(self, bus: str) -> bool:
-        return True
-
-
-def _dry_build(c: _Checker, mod: ModuleConfig, cls: Any, entry: MarkedMap) -> None:
-    """Build the module on null channels so checks that span several keys (thresholds in
-    order, calibration points apart) are reported by `ramp check` with their line."""
-    from ramp.hal.simio import SimBus
-    from ramp.layers.module_distribution import BoundDevice
-
-    bus = SimBus("check", {}, world=_NullWorld())
-    devices = {dev: BoundDevice(bus.channel(dc.kind, f"{mod.name}.{dev}", {}), dc.params)
-               for dev, dc in mod.devices.items()}
-    try:
-        cls(mod.name, devices, mod.settings)
-    except ConfigError as exc:
-        key = exc.key.split(".")[0]
-        line = mod.devices[key].line if key in mod.devices else entry.lines.get(key, entry.line)
-        c.err(f"modules.{mod.name}.{exc.key}" if exc.key else f"modules.{mod.name}", line,
-              exc.detail)
 
 
 def _module(c: _Checker, path: str, name: str, type_name: str, cls: type[Module],
@@ -578,7 +529,8 @@ def _module(c: _Checker, path: str, name: str, type_name: str, cls: type[Module]
                   f"{dev} needs")
             continue
         ch_fields = bcls.channel_fields[spec.kind]
-        all_fields = {**ch_fields, **spec.fields}
+        # The driver's channel keys and the device's own, with the device's rules.
+        all_fields = Block({**ch_fields, **spec.fields}, getattr(spec.fields, "rules", ()))
         values = c.values(raw, dpath, all_fields, skip={"bus"})
         channel = {k: values[k] for k in ch_fields if k in values}
         params = {k: values[k] for k in spec.fields if k in values}

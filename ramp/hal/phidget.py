@@ -23,7 +23,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from ramp.errors import DeviceError
+from ramp.errors import ConfigError, DeviceError
 from ramp.hal.interfaces import AnalogInput, BridgeInput, Bus, DigitalInput, DigitalOutput
 from ramp.schema import Field
 
@@ -100,13 +100,18 @@ class _Slot:
     value: float | bool | None = None  # newest sample; None until the first one
     heard: bool = False  # a sample or an error event arrived since open
     error_code: int | None = None  # last error event, cleared by the next sample
-    want: bool = False  # digital out: the state commanded
+    output: DigitalOutput | None = None  # digital out: its channel holds the state commanded
     sent: bool | None = None  # digital out: the state last handed to the library
     retry_at: float = -math.inf
 
     @property
     def is_input(self) -> bool:
         return self.kind != "digital_out"
+
+    @property
+    def want(self) -> bool:
+        """Digital out: the state its channel is commanded."""
+        return self.output is not None and self.output.state
 
     def where(self) -> str:
         return f"{self.kind} channel {self.channel}"
@@ -148,11 +153,7 @@ class _DigitalIn(DigitalInput):
 class _DigitalOut(DigitalOutput):
     def __init__(self, bus: PhidgetBus, label: str, slot: _Slot) -> None:
         super().__init__(bus, label)
-        self._slot = slot
-
-    def _apply(self, on: bool) -> None:
-        # Only recorded here; the bus's tick hands it to the library when attached.
-        self._slot.want = on
+        slot.output = self  # the bus's tick hands its state to the library when attached
 
 
 _HAL_CLASS: dict[str, type] = {
@@ -204,28 +205,18 @@ class PhidgetBus(Bus):
 
     # -- channels ---------------------------------------------------------------------------
     def _make_channel(self, kind: str, label: str, spec: dict[str, Any]) -> Any:
-        checked: dict[str, Any] = {}
-        for key, f in self.channel_fields[kind].items():
-            if key in spec:
-                checked[key] = f.check(spec[key])
-            elif f.required:
-                raise ValueError(f"{label}: {key} missing; expected {f.expected()}")
-            else:
-                checked[key] = f.default
-        channel = checked["channel"]
-        gain = checked.get("gain", 128)
+        channel = spec["channel"]
+        gain = spec.get("gain", 128)
         slot = next((s for s in self._slots if s.kind == kind and s.channel == channel), None)
         if slot is None:
             slot = _Slot(kind=kind, channel=channel, gain=gain)
             self._slots.append(slot)
         elif kind == "digital_out":
-            raise ValueError(
-                f"{label}: digital_out channel {channel} is already driven by {slot.who()}"
-            )
+            raise ConfigError(
+                f"digital_out channel {channel} is already driven by {slot.who()}", key=label)
         elif kind == "bridge_in" and slot.gain != gain:
-            raise ValueError(
-                f"{label}: bridge_in channel {channel} already uses gain {slot.gain}"
-            )
+            raise ConfigError(
+                f"bridge_in channel {channel} already uses gain {slot.gain}", key=label)
         slot.labels.append(label)
         return _HAL_CLASS[kind](self, label, slot)
 

@@ -12,7 +12,6 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
-from ramp.errors import ConfigError
 from ramp.hal.interfaces import AnalogInput, DigitalInput, DigitalOutput, MotorChannel
 from ramp.layers.functional import (
     BATTERY_FIELDS,
@@ -27,13 +26,11 @@ from ramp.layers.functional import (
     SystemVoltage,
     Voltage,
     VoltageDisplay,
-    block,
-    channel,
 )
 from ramp.layers.module_distribution import DeviceSpec, Function, Module, Property, Task
 from ramp.mcp.messages import Value
 from ramp.mcp.params import FlagParam, FloatParam, IntParam
-from ramp.schema import Field
+from ramp.schema import Block
 
 WHEELS = ("lf_wheel", "lb_wheel", "rf_wheel", "rb_wheel")
 DISPLAY_LEDS = ("led_high", "led_mid", "led_low")
@@ -43,17 +40,17 @@ class BaseModule(Module):
     """The Base: `drive`/`stop` for the whole drive train, `vel` per wheel, `user_led.on`."""
 
     devices: ClassVar[dict[str, DeviceSpec]] = {
-        **{w: DeviceSpec("motor", dict(MOTOR_FIELDS), f"{w[:2]} drive motor") for w in WHEELS},
-        "battery": DeviceSpec("analog_in", dict(BATTERY_FIELDS),
+        **{w: DeviceSpec("motor", MOTOR_FIELDS, f"{w[:2]} drive motor") for w in WHEELS},
+        "battery": DeviceSpec("analog_in", BATTERY_FIELDS,
                               "power rail through a Phidget 1135 voltage sensor"),
-        "l_button": DeviceSpec("digital_in", dict(BUTTON_FIELDS), "left docking button"),
-        "r_button": DeviceSpec("digital_in", dict(BUTTON_FIELDS), "right docking button"),
-        "user_led": DeviceSpec("digital_out", {}, "general purpose LED"),
-        "led_high": DeviceSpec("digital_out", {}, "battery display, top LED"),
-        "led_mid": DeviceSpec("digital_out", {}, "battery display, middle LED"),
-        "led_low": DeviceSpec("digital_out", {}, "battery display, bottom LED"),
+        "l_button": DeviceSpec("digital_in", BUTTON_FIELDS, "left docking button"),
+        "r_button": DeviceSpec("digital_in", BUTTON_FIELDS, "right docking button"),
+        "user_led": DeviceSpec("digital_out", Block(), "general purpose LED"),
+        "led_high": DeviceSpec("digital_out", Block(), "battery display, top LED"),
+        "led_mid": DeviceSpec("digital_out", Block(), "battery display, middle LED"),
+        "led_low": DeviceSpec("digital_out", Block(), "battery display, bottom LED"),
     }
-    settings: ClassVar[dict[str, dict[str, Field]]] = {
+    settings: ClassVar[dict[str, Block]] = {
         "battery_filter": FILTER_FIELDS,
         "voltage_display": DISPLAY_FIELDS,
     }
@@ -61,30 +58,18 @@ class BaseModule(Module):
     def __init__(self, name: str, devices: Mapping[str, Any],
                  settings: Mapping[str, Mapping[str, Any]] | None = None) -> None:
         super().__init__(name)
-        settings = settings or {}
-        motors = {}
-        for w in WHEELS:
-            ch, params = channel(devices, w, MotorChannel)
-            motors[w] = Motor.from_params(ch, params)
+        motors = {w: Motor.from_params(*self.device(devices, w, MotorChannel)) for w in WHEELS}
         self.drive_train = BaseDrive(*(motors[w] for w in WHEELS))
-
-        ch, params = channel(devices, "battery", AnalogInput)
-        filt = block(FILTER_FIELDS, settings.get("battery_filter"), "battery_filter")
-        try:
-            self.voltage = SystemVoltage(Voltage.from_params(ch, params),
-                                         float(filt["time_constant"]))
-        except ValueError as exc:
-            raise ConfigError(str(exc), key="battery") from exc
-
-        self.buttons = {b: Button.from_params(*channel(devices, b, DigitalInput))
+        filt = self.setting(settings, "battery_filter")
+        self.voltage = SystemVoltage(
+            Voltage.from_params(*self.device(devices, "battery", AnalogInput)),
+            filt["time_constant"])
+        self.buttons = {b: Button.from_params(*self.device(devices, b, DigitalInput))
                         for b in ("l_button", "r_button")}
-        self.user_led = Led(channel(devices, "user_led", DigitalOutput)[0])
-        high, mid, low = (Led(channel(devices, n, DigitalOutput)[0]) for n in DISPLAY_LEDS)
-        disp = block(DISPLAY_FIELDS, settings.get("voltage_display"), "voltage_display")
-        try:
-            self.display = VoltageDisplay.from_settings(high, mid, low, disp)
-        except ValueError as exc:
-            raise ConfigError(str(exc), key="voltage_display") from exc
+        self.user_led = Led(self.device(devices, "user_led", DigitalOutput)[0])
+        high, mid, low = (Led(self.device(devices, n, DigitalOutput)[0]) for n in DISPLAY_LEDS)
+        self.display = VoltageDisplay.from_settings(
+            high, mid, low, self.setting(settings, "voltage_display"))
 
         speed = IntParam(-100, 100)
         self.add(Function(name, "drive", (speed, FloatParam()), self._drive,

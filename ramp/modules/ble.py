@@ -13,7 +13,6 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
-from ramp.errors import ConfigError
 from ramp.hal.interfaces import AnalogInput, BridgeInput, MotorChannel
 from ramp.layers.functional import (
     LIFT_FIELDS,
@@ -24,52 +23,34 @@ from ramp.layers.functional import (
     LoadCell,
     Motor,
     ThompsonActuator,
-    block,
-    channel,
 )
 from ramp.layers.module_distribution import DeviceSpec, Function, Module, Property, Task
 from ramp.mcp.params import FloatParam, IntParam
-from ramp.schema import Field
+from ramp.schema import Block
 
 
 class BleModule(Module):
     """The BLE: `lift.vel/extend/retract/pos`, `chain.vel`, `load.tare`."""
 
     devices: ClassVar[dict[str, DeviceSpec]] = {
-        "chain_left": DeviceSpec("motor", dict(MOTOR_FIELDS), "bucket ladder chain, left"),
-        "chain_right": DeviceSpec("motor", dict(MOTOR_FIELDS), "bucket ladder chain, right"),
-        "lift_motor": DeviceSpec("motor", dict(MOTOR_FIELDS), "lift linear actuator"),
-        "lift_pot": DeviceSpec("analog_in", dict(POT_FIELDS), "lift feedback potentiometer"),
-        "load_cell": DeviceSpec("bridge_in", dict(LOAD_CELL_FIELDS), "bin load cell"),
+        "chain_left": DeviceSpec("motor", MOTOR_FIELDS, "bucket ladder chain, left"),
+        "chain_right": DeviceSpec("motor", MOTOR_FIELDS, "bucket ladder chain, right"),
+        "lift_motor": DeviceSpec("motor", MOTOR_FIELDS, "lift linear actuator"),
+        "lift_pot": DeviceSpec("analog_in", POT_FIELDS, "lift feedback potentiometer"),
+        "load_cell": DeviceSpec("bridge_in", LOAD_CELL_FIELDS, "bin load cell"),
     }
-    settings: ClassVar[dict[str, dict[str, Field]]] = {"lift": LIFT_FIELDS}
+    settings: ClassVar[dict[str, Block]] = {"lift": LIFT_FIELDS}
 
     def __init__(self, name: str, devices: Mapping[str, Any],
                  settings: Mapping[str, Mapping[str, Any]] | None = None) -> None:
         super().__init__(name)
-        settings = settings or {}
-        left, right, lift_m = (Motor.from_params(*channel(devices, n, MotorChannel))
+        left, right, lift_m = (Motor.from_params(*self.device(devices, n, MotorChannel))
                                for n in ("chain_left", "chain_right", "lift_motor"))
         self.chain = BucketLadder(left, right)
-        pot, pot_params = channel(devices, "lift_pot", AnalogInput)
-        for key in POT_FIELDS:
-            if key not in pot_params:
-                raise ConfigError("missing; expected a number", key=f"lift_pot.{key}")
-        if pot_params["volts_at_0"] == pot_params["volts_at_1"]:
-            raise ConfigError("volts_at_0 and volts_at_1 must differ", key="lift_pot")
-        lift_settings = block(LIFT_FIELDS, settings.get("lift"), "lift")
-        try:
-            self.lift = ThompsonActuator.from_params(lift_m, pot, pot_params, lift_settings)
-        except ValueError as exc:
-            raise ConfigError(str(exc), key="lift") from exc
-        cell, cell_params = channel(devices, "load_cell", BridgeInput)
-        try:
-            self.load = LoadCell.from_params(cell, cell_params)
-        except KeyError:
-            raise ConfigError("missing; expected kg per mV/V of bridge output",
-                              key="load_cell.kg_per_mv_v") from None
-        except ValueError as exc:
-            raise ConfigError(str(exc), key="load_cell.kg_per_mv_v") from exc
+        pot, pot_params = self.device(devices, "lift_pot", AnalogInput)
+        self.lift = ThompsonActuator.from_params(lift_m, pot, pot_params,
+                                                 self.setting(settings, "lift"))
+        self.load = LoadCell.from_params(*self.device(devices, "load_cell", BridgeInput))
 
         speed = IntParam(-100, 100)
         self.add(Function("lift", "vel", (speed,), self.lift.vel, "motion",

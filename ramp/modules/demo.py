@@ -7,15 +7,15 @@ from typing import Any, ClassVar
 
 from ramp.layers.module_distribution import BoundDevice, DeviceSpec, Function, Module, Property
 from ramp.mcp.params import FlagParam, IntParam
-from ramp.schema import Field
+from ramp.schema import Block
 
 
 class DemoModule(Module):
     devices: ClassVar[dict[str, DeviceSpec]] = {
-        "motor": DeviceSpec("motor", {}, "any motor channel"),
-        "lamp": DeviceSpec("digital_out", {}, "any digital output"),
+        "motor": DeviceSpec("motor", Block(), "any motor channel"),
+        "lamp": DeviceSpec("digital_out", Block(), "any digital output"),
     }
-    settings: ClassVar[dict[str, dict[str, Field]]] = {}
+    settings: ClassVar[dict[str, Block]] = {}
 
     def __init__(self, name: str, devices: Mapping[str, BoundDevice],
                  settings: Mapping[str, Mapping[str, Any]]) -> None:

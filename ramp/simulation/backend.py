@@ -18,7 +18,7 @@ from firmware_like.marte import MarteWorld
 from ramp.clock import VirtualClock
 from ramp.config import Config, check_config
 from ramp.errors import ConfigErrors
-from ramp.runtime.supervisor import Supervisor
+from ramp.runtime import build
 from ramp.scheduler import Scheduler
 from ramp.simulation.backplane import SimBackplane
 
@@ -46,9 +46,8 @@ class SimBackend:
         self.clock = clock if clock is not None else VirtualClock()
         self.config = config if isinstance(config, Config) else load_backend_config(config)
         self.backplane = SimBackplane(self.config, world, wire_level=wire_level)
-        self.supervisor = Supervisor(self.config, self.clock,
-                                     bus_factory=self.backplane.bus_factory, host="127.0.0.1",
-                                     port=0)
+        self.supervisor = build(self.config, self.clock, self.backplane.bus_factory,
+                                host="127.0.0.1", port=0)
         self.backplane.attach(self.supervisor)
         self.supervisor.start()
         self.supervisor.settle()

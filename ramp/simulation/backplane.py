@@ -24,7 +24,7 @@ from firmware_like.marte import MarteWorld
 from ramp.config import BusConfig, Config
 from ramp.hal.interfaces import Bus
 from ramp.hal.simio import SimBus
-from ramp.runtime.supervisor import default_bus_factory
+from ramp.runtime import default_bus_factory
 
 if TYPE_CHECKING:
     from ramp.runtime.supervisor import Supervisor

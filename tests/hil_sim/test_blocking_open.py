@@ -19,7 +19,7 @@ import pytest
 from ramp.clock import MonotonicClock
 from ramp.errors import DeviceError
 from ramp.hal.simio import SimBus
-from ramp.runtime.supervisor import Supervisor
+from ramp.runtime import Supervisor, build
 from tests.harness import DEMO_YAML, MARTE_YAML, FakeWorld, config_from
 from tests.harness import ask_line as ask
 from tests.harness import start_ramp as start
@@ -93,7 +93,7 @@ def test_a_hanging_open_and_reopen_leave_the_loop_and_other_modules_alone(
             return hanging["io"]
         return SimBus(bc.name, dict(bc.params), world=world)
 
-    sup = Supervisor(config_from(DEMO_YAML.replace("timeout: 0.5", "timeout: 2.0")),
+    sup = build(config_from(DEMO_YAML.replace("timeout: 0.5", "timeout: 2.0")),
                      MonotonicClock(), bus_factory=factory, host="127.0.0.1", port=0)
     bus = hanging["io"]
     try:

@@ -10,13 +10,13 @@ from collections.abc import Mapping
 from typing import Any
 
 from ramp.hal.interfaces import DigitalInput
-from ramp.schema import Field
+from ramp.schema import Block, Field
 
 #: YAML keys of every button device.
-BUTTON_FIELDS: dict[str, Field] = {
+BUTTON_FIELDS = Block({
     "debounce": Field(float, 0.02, 0.0, 1.0, what="a debounce time in s"),
     "active_low": Field(bool, False),
-}
+})
 
 
 class Button:

@@ -12,13 +12,13 @@ from typing import Any
 
 from ramp.errors import RequestError
 from ramp.hal.interfaces import BridgeInput
-from ramp.schema import Field
+from ramp.schema import Block, Field, Rule
 
 #: YAML keys of the load cell (kg_per_mv_v is required: no default could be right).
-LOAD_CELL_FIELDS: dict[str, Field] = {
+LOAD_CELL_FIELDS = Block({
     "kg_per_mv_v": Field(float, lo=-1e6, hi=1e6, what="kg per mV/V of bridge output"),
     "offset_mv_v": Field(float, 0.0, -1000.0, 1000.0, what="the bridge reading at 0 kg"),
-}
+}, [Rule(lambda v: v["kg_per_mv_v"] != 0, "kg_per_mv_v must not be zero", "kg_per_mv_v")])
 
 
 class LoadCell:

@@ -7,21 +7,23 @@ from collections.abc import Mapping
 from typing import Any
 
 from ramp.hal.interfaces import MotorChannel
-from ramp.schema import Field
+from ramp.schema import Block, Field
 
 #: YAML keys of every motor device.
-MOTOR_FIELDS: dict[str, Field] = {
+MOTOR_FIELDS = Block({
     "polarity": Field(int, 1, choices=(-1, 1), what="a motor polarity"),
     "full_duty": Field(float, 1.0, 0.0, 1.0, what="a duty for 100 %"),
     "deadband": Field(float, 0.0, 0.0, 0.5, what="a duty deadband"),
-}
+})
 
 
 class Motor:
     """A velocity in % of full speed, turned into the controller's signed duty.
 
     `velocity` is what was last commanded (the number the operator asked for), even when the
-    deadband sends it out as zero: it is what `get` reports.
+    deadband sends it out as zero: it is what `get` reports. The duty it becomes is the
+    channel's (`channel.duty`), and nothing below keeps another copy. The router has checked
+    the velocity against the module's table, so it is trusted here: asserted, not clamped.
     """
 
     def __init__(self, channel: MotorChannel, polarity: int = 1, full_duty: float = 1.0,
@@ -46,18 +48,18 @@ class Motor:
         return self._velocity
 
     def duty_for(self, velocity: int) -> float:
-        """The duty `velocity` % goes out as: polarity, full-duty scaling, deadband."""
-        v = max(-100, min(100, int(velocity)))
-        duty = self.polarity * v / 100.0 * self.full_duty
+        """The duty `velocity` % goes out as: polarity, full-duty scaling, deadband (within
+        -1..1 by construction: |velocity| <= 100 and full_duty <= 1)."""
+        duty = self.polarity * velocity / 100.0 * self.full_duty
         if abs(duty) < self.deadband:
             return 0.0
-        return max(-1.0, min(1.0, duty))
+        return duty
 
     def set_velocity(self, velocity: int) -> None:
-        """Command `velocity` % (clamped to -100..100); the write does not block."""
-        v = max(-100, min(100, int(velocity)))
-        self._velocity = v
-        self.channel.set_duty(self.duty_for(v))
+        """Command `velocity` % (-100..100, as validated above); the write does not block."""
+        assert -100 <= velocity <= 100, f"{self.channel.label}: velocity {velocity} % unchecked"
+        self._velocity = velocity
+        self.channel.set_duty(self.duty_for(velocity))
 
     def stop(self) -> None:
         self.set_velocity(0)

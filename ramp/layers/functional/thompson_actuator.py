@@ -25,22 +25,23 @@ from typing import Any, Literal
 from ramp.errors import RequestError
 from ramp.hal.interfaces import AnalogInput
 from ramp.layers.functional.motor import Motor
-from ramp.schema import Field
+from ramp.schema import Block, Field, Rule
 
 #: YAML keys of the lift's feedback pot (required: every actuator's pot sits differently).
-POT_FIELDS: dict[str, Field] = {
+POT_FIELDS = Block({
     "volts_at_0": Field(float, lo=-50.0, hi=50.0, what="the pot voltage when fully retracted"),
     "volts_at_1": Field(float, lo=-50.0, hi=50.0, what="the pot voltage when fully extended"),
-}
+}, [Rule(lambda v: v["volts_at_0"] != v["volts_at_1"], "volts_at_0 and volts_at_1 must differ")])
 
 #: Settings block `lift`.
-LIFT_FIELDS: dict[str, Field] = {
+LIFT_FIELDS = Block({
     "tolerance": Field(float, 0.03, 0.001, 0.5, what="a position tolerance"),
     "hysteresis": Field(float, 0.01, 0.0, 0.5, what="how close to its target a move stops"),
     "stall_time": Field(float, 1.5, 0.05, 60.0, what="a stall time in s"),
     "stall_min_change": Field(float, 0.01, 0.0, 0.5,
                               what="the least position change in stall_time at full speed"),
-}
+}, [Rule(lambda v: v["hysteresis"] < v["tolerance"],
+         "lift hysteresis must be below its tolerance")])
 
 END_LOW = 0.01
 END_HIGH = 0.99
@@ -126,8 +127,9 @@ class ThompsonActuator:
 
     def move_to(self, target: float) -> None:
         """Go to `target` (0..1) and hold it."""
+        assert 0.0 <= target <= 1.0, f"lift target {target} unchecked"
         self._refuse_if_faulted()
-        self.mode, self.target, self._seeking = "hold", min(1.0, max(0.0, target)), True
+        self.mode, self.target, self._seeking = "hold", target, True
         pos = self.position
         out = self.motor.velocity
         if out != 0 and _sign(out) != _sign(self.target - pos):

@@ -13,18 +13,18 @@ from collections.abc import Mapping
 from typing import Any
 
 from ramp.hal.interfaces import AnalogInput
-from ramp.schema import Field
+from ramp.schema import Block, Field
 
 #: YAML keys of the battery device (defaults: the 1135's fixed conversion).
-BATTERY_FIELDS: dict[str, Field] = {
+BATTERY_FIELDS = Block({
     "offset": Field(float, 2.5, -10.0, 10.0, what="the pin voltage at 0 V on the rail"),
     "scale": Field(float, 0.0681, 0.001, 10.0, what="pin volts per rail volt"),
-}
+})
 
 #: Settings block `battery_filter`: the low-pass time constant in seconds.
-FILTER_FIELDS: dict[str, Field] = {
+FILTER_FIELDS = Block({
     "time_constant": Field(float, 2.0, 0.01, 600.0, what="a filter time constant in s"),
-}
+})
 
 
 class Voltage:

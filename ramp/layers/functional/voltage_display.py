@@ -23,10 +23,14 @@ from collections.abc import Mapping
 from typing import Any
 
 from ramp.layers.functional.led import Led
-from ramp.schema import Field
+from ramp.schema import Block, Field, Rule
 
 #: Settings block `voltage_display`: thresholds in rail volts (descending), blink rate, band.
-DISPLAY_FIELDS: dict[str, Field] = {
+_ORDER = ("low_blink", "mid_off", "mid_blink", "high_off", "high_blink")
+_DESCENDING = ("voltage display thresholds must be five strictly descending values: "
+               "high_blink > high_off > mid_blink > mid_off > low_blink")
+
+DISPLAY_FIELDS = Block({
     "high_blink": Field(float, 20.0, 0.0, 100.0, what="volts below which the high LED blinks"),
     "high_off": Field(float, 19.4, 0.0, 100.0, what="volts below which the high LED is off"),
     "mid_blink": Field(float, 18.8, 0.0, 100.0, what="volts below which the mid LED blinks"),
@@ -34,9 +38,8 @@ DISPLAY_FIELDS: dict[str, Field] = {
     "low_blink": Field(float, 17.6, 0.0, 100.0, what="volts below which the low LED blinks"),
     "blink_hz": Field(float, 2.0, 0.1, 20.0, what="a blink rate in Hz"),
     "hysteresis": Field(float, 0.1, 0.0, 5.0, what="volts a level must be exceeded by"),
-}
-
-_ORDER = ("low_blink", "mid_off", "mid_blink", "high_off", "high_blink")
+}, [Rule(lambda v: all(v[a] < v[b] for a, b in zip(_ORDER, _ORDER[1:], strict=False)),
+         _DESCENDING)])
 
 #: Per level (0..5): the modes of (high, mid, low).
 PATTERN: tuple[tuple[str, str, str], ...] = (
@@ -57,8 +60,7 @@ class VoltageDisplay:
         """`thresholds` ascending: (low_blink, mid_off, mid_blink, high_off, high_blink)."""
         pairs = zip(thresholds, thresholds[1:], strict=False)
         if len(thresholds) != 5 or any(a >= b for a, b in pairs):
-            raise ValueError("voltage display thresholds must be five strictly descending "
-                             "values: high_blink > high_off > mid_blink > mid_off > low_blink")
+            raise ValueError(_DESCENDING)
         self.leds = (high, mid, low)
         self.thresholds = thresholds
         self.blink_hz = blink_hz

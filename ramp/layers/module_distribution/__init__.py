@@ -1,8 +1,10 @@
-"""Module Distribution layer: each module's table-driven router (functions, get rows)."""
+"""Module Distribution layer: each module's table-driven router (functions, get rows), the
+one place a request is validated and `describe` comes from."""
 
 from __future__ import annotations
 
 from ramp.layers.module_distribution.router import (
+    KINDS,
     BoundDevice,
     DeviceSpec,
     Function,
@@ -10,6 +12,9 @@ from ramp.layers.module_distribution.router import (
     Module,
     Property,
     Task,
+    Version,
+    answer,
 )
 
-__all__ = ["BoundDevice", "DeviceSpec", "Function", "Kind", "Module", "Property", "Task"]
+__all__ = ["KINDS", "BoundDevice", "DeviceSpec", "Function", "Kind", "Module", "Property",
+           "Task", "Version", "answer"]

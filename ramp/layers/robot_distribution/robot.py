@@ -1,39 +1,42 @@
-"""Robot distribution layer: routes requests to modules and owns the robot-wide rules.
+"""Robot Distribution layer: routes requests to modules and owns the robot-wide rules.
 
 Module state, control ownership and the watchdog live here because they concern the whole
-robot; each module's own table does the device/function/parameter checks. Checks run in the
-SPEC's order: module known, module state, device and function, parameters, ownership.
+robot; each module's own table (the module distribution layer) does the device, function and
+parameter checks. Checks run in the SPEC's order: module known, module state, device and
+function, parameters, ownership.
+
+The server hands each message down as a `RequestContext` (client, time): `message(ctx)` once
+(it feeds the watchdog), then `request(ctx, req)` for each of its requests, which returns the
+request's answer as it goes on the wire.
+
+**The state's version.** Anything a `get` reports changes only inside a tick (readings,
+controllers, LED phases) or through this layer (a request that is not a read, a lost client,
+a stall, a robot-wide stop). `changes` counts the second kind; with the scheduler's tick
+count it makes the version a module's cached get answer is checked against
+(`ramp.layers.module_distribution`), so a cache can never serve a stale answer.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
-from typing import Literal
+from collections.abc import Callable
+from dataclasses import dataclass
 
-from ramp.errors import DeviceError, RequestError
+from ramp.errors import RequestError
 from ramp.layers.module_distribution import Function, Module
+from ramp.layers.module_distribution.router import Version, answer
+from ramp.layers.robot_distribution.context import Client, RequestContext
 from ramp.layers.robot_distribution.control import Control
+from ramp.layers.robot_distribution.registry import ModuleRegistry, ModuleSlot
 from ramp.layers.robot_distribution.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S, Watchdog
 from ramp.mcp.messages import Request, Response, Value, error_response
 from ramp.mcp.params import FloatParam, NameParam
+from ramp.mcp.protocol import format_response
 
 log = logging.getLogger("ramp.robot")
 
-ModuleState = Literal["ok", "fault", "detached"]
-
-
-@dataclass
-class ModuleSlot:
-    """A known module and whether it is usable now."""
-
-    name: str
-    module: Module
-    buses: tuple[str, ...] = ()
-    state: ModuleState = "detached"
-    reason: str = "not started"
-    tasks: list[object] = field(default_factory=list)
+#: Observer hook: (owner name or "none", the client's peer, clock time) when control changes.
+ControlHook = Callable[[str, str, float], None]
 
 
 @dataclass(frozen=True)
@@ -47,14 +50,8 @@ class Health:
     clients: int
 
 
-class Client:
-    """What the robot layer needs to know of a connection: identity and a printable peer."""
-
-    def __init__(self, peer: str) -> None:
-        self.peer = peer
-
-    def __repr__(self) -> str:
-        return f"Client({self.peer})"
+def _error(req: Request, code: str, detail: str) -> bytes:
+    return format_response(error_response(req.module, req.device, code, detail)).encode("ascii")
 
 
 class RobotRequests(Module):
@@ -66,14 +63,19 @@ class RobotRequests(Module):
         self.add(Function("robot", "modules", (), layer.list_modules, "read",
                           "list attached modules"))
         self.add(Function("watchdog", "timeout", (FloatParam(MIN_TIMEOUT_S, MAX_TIMEOUT_S),),
-                          layer.set_timeout, "state", "watchdog timeout in s"))
+                          layer.set_timeout, "state", "watchdog timeout in s",
+                          takes_context=True))
         self.add(Function("control", "acquire", (NameParam(reserved=("none",)),),
-                          layer.acquire, "control", "become the owner (stops motion first)"))
+                          layer.acquire, "control", "become the owner (stops motion first)",
+                          takes_context=True))
         self.add(Function("control", "release", (), layer.release, "state",
-                          "give control up"))
+                          "give control up", takes_context=True))
 
     def _get(self) -> list[Response]:
         return self.layer.health_rows()
+
+    def get_line(self, version: Version) -> bytes:
+        return answer(self.layer.health_rows())  # uptime moves: never cached
 
     #: The rows of `robot.get`: (device, property, type, unit).
     HEALTH_ROWS = (("robot", "uptime", "float", "s"), ("tick", "rate", "float", "Hz"),
@@ -91,6 +93,8 @@ class RobotRequests(Module):
                                 (prop, kind, unit) if unit else (prop, kind)))
         out.extend(Response("robot", name, "property", ("state", "name"))
                    for name in self.layer.slots)
+        out.extend(Response("robot", fn.device, "kind", (fn.name, fn.kind))
+                   for fn in self.functions.values())
         return out
 
     def stop(self) -> None:
@@ -103,141 +107,115 @@ class RobotRequests(Module):
 class RobotDistribution:
     """Routes each request of a message and applies watchdog and arbitration rules."""
 
-    def __init__(self, slots: dict[str, ModuleSlot], watchdog: Watchdog,
-                 health: Callable[[], Health]) -> None:
-        self.slots = slots
+    def __init__(self, registry: ModuleRegistry, watchdog: Watchdog,
+                 health: Callable[[], Health], ticks: Callable[[], int] = lambda: 0) -> None:
+        self.registry = registry
+        self.slots: dict[str, ModuleSlot] = registry.slots
         self.watchdog = watchdog
         self.control = Control()
         self._health = health
+        #: The scheduler's tick count (the runtime passes it): half of the state's version.
+        self._ticks = ticks
+        #: State changes made outside a tick (see the module docstring).
+        self.changes = 0
         self.robot = RobotRequests(self)
-        self._client: Client | None = None
-        self._now = 0.0
-        #: Called with (module name, error) when a request hit a device fault.
-        self.on_device_error: Callable[[str, DeviceError], None] | None = None
+        #: Observer hook (the flight recorder): None costs nothing.
+        self.on_control: ControlHook | None = None
+
+    @property
+    def version(self) -> Version:
+        return (self._ticks(), self.changes)
 
     # -- messages -----------------------------------------------------------------------------
-    def handle(self, client: Client, requests: tuple[Request, ...], now: float,
-               tail: Response | None = None) -> list[Response]:
-        """Every request of one message, in order; `tail` (a syntax error) ends the answer."""
-        return [r for part in self.handle_steps(client, requests, now, tail) for r in part]
+    def message(self, ctx: RequestContext) -> None:
+        """A complete message arrived (any message: heartbeat, erroneous or too long): it
+        feeds the watchdog if its sender is the feeder, before its requests are handled."""
+        self.watchdog.feed(ctx.client, ctx.now)
 
-    def handle_steps(self, client: Client, requests: tuple[Request, ...], now: float,
-                     tail: Response | None = None) -> Iterator[list[Response]]:
-        """The same, one request per step, so the server can pause between requests.
-
-        Every complete message feeds the watchdog if its sender is the feeder, as soon as it
-        has arrived (before its requests, which may be answered over several turns).
-        """
-        self.watchdog.feed(client, now)
-        for req in requests:
-            yield self._one(client, req, now)
-        if tail is not None:
-            yield [tail]
-
-    def feed(self, client: Client, now: float) -> None:
-        """A complete message that carried no requests we could read (too long) still feeds."""
-        self.watchdog.feed(client, now)
-
-    def _one(self, client: Client, req: Request, now: float) -> list[Response]:
+    def request(self, ctx: RequestContext, req: Request) -> bytes:
+        """One request: its answer as it goes on the wire (b"" for an accepted action)."""
         if req.module == "robot":
             target: Module = self.robot
         else:
             slot = self.slots.get(req.module)
             if slot is None:
                 known = " ".join(["robot", *self.slots])
-                return [error_response(req.module, req.device, "unknown_module",
-                                       f"no module {req.module}; known: {known}")]
+                return _error(req, "unknown_module", f"no module {req.module}; known: {known}")
             if slot.state != "ok":
                 if req.device == req.module and req.function == "stop" and not req.params:
-                    return []  # its motion is already stopped
+                    return b""  # its motion is already stopped
                 code = "not_attached" if slot.state == "detached" else "fault"
-                return [error_response(req.module, req.device, code,
-                                       f"module {slot.name} is {slot.state}: {slot.reason}")]
+                return _error(req, code, f"module {slot.name} is {slot.state}: {slot.reason}")
             target = slot.module
         try:
             fn, values = target.lookup(req)
         except RequestError as exc:
-            return [error_response(req.module, req.device, exc.code, exc.detail)]
-        if fn.kind in ("motion", "state") and not self.control.may_command(client):
-            return [error_response(req.module, req.device, "not_owner",
-                                   f"control is held by {self.control.owner_name}")]
-        self._client, self._now = client, now
+            return _error(req, exc.code, exc.detail)
+        kind = fn.kind
+        if kind == "read":
+            line = fn.line
+            return line(self.version) if line is not None else answer(fn.run(*values))
+        if (kind == "motion" or kind == "state") and not self.control.may_command(ctx.client):
+            return _error(req, "not_owner", f"control is held by {self.control.owner_name}")
+        self.changes += 1
         try:
-            result = fn.run(*values)
+            result = fn.run(ctx, *values) if fn.takes_context else fn.run(*values)
         except RequestError as exc:
-            return [error_response(req.module, req.device, exc.code, exc.detail)]
-        except DeviceError as exc:
-            self._half_done(fn, target)
-            if self.on_device_error is not None:
-                self.on_device_error(req.module, exc)
-            return [error_response(req.module, req.device, "fault", str(exc))]
+            return _error(req, exc.code, exc.detail)
         except Exception as exc:
             log.exception("request %s:%s.%s failed", req.module, req.device, req.function)
-            self._half_done(fn, target)
-            return [error_response(req.module, req.device, "fault",
-                                   f"internal error {type(exc).__name__}")]
-        finally:
-            self._client = None
-        self._after(fn, client, now)
-        return result or []
-
-    def _half_done(self, fn: Function, target: Module) -> None:
-        """A motion request that failed part-way may have started some motors with the
-        watchdog idle: stop that module."""
-        if fn.kind == "motion":
-            try:
-                target.stop()
-            except Exception:
-                log.exception("module %s failed to stop", target.name)
-
-    def _after(self, fn: Function, client: Client, now: float) -> None:
-        """Watchdog bookkeeping once a request was accepted."""
-        if fn.kind == "motion":
+            if kind == "motion":  # it may have started some motors with the watchdog idle
+                self._stop(target, "a failed motion request")
+            return _error(req, "fault", f"internal error {type(exc).__name__}")
+        if kind == "motion":
             if self.any_moving():
-                self.watchdog.arm(client, now)
+                self.watchdog.arm(ctx.client, ctx.now)
             else:
-                self.watchdog.reset()
-        elif fn.kind == "stop" and not self.any_moving():
-            self.watchdog.disarm()
+                self.watchdog.reset(ctx.now)
+        elif kind == "stop" and not self.any_moving():
+            self.watchdog.disarm(ctx.now)
+        return answer(result) if result else b""
 
     # -- robot-level functions ----------------------------------------------------------------
     def list_modules(self) -> list[Response]:
-        names: tuple[Value, ...] = tuple(n for n, s in self.slots.items() if s.state == "ok")
+        names: tuple[Value, ...] = tuple(self.registry.attached())
         return [Response("robot", "robot", "modules", names)]
 
-    def set_timeout(self, seconds: float) -> None:
+    def set_timeout(self, ctx: RequestContext, seconds: float) -> None:
         self.watchdog.timeout = seconds
-        log.info("watchdog timeout set to %.3f s by %s", seconds, self._peer())
+        log.info("watchdog timeout set to %.3f s by %s", seconds, ctx.client.peer)
 
-    def acquire(self, name: str) -> None:
-        client = self._client
-        assert client is not None
+    def acquire(self, ctx: RequestContext, name: str) -> None:
+        client = ctx.client
         previous = self.control.owner_name
         if self.control.acquire(client, name):
-            self.stop_all(f"control acquired by {name}")
+            self.stop_all(f"control acquired by {name}", ctx.now)
             if previous != "none":
                 log.warning("control taken over: %s -> %s (%s); motion stopped",
                             previous, name, client.peer)
             else:
                 log.info("control acquired by %s (%s)", name, client.peer)
+        self._control_changed(client, ctx.now)
 
-    def release(self) -> None:
-        client = self._client
-        if client is not None and self.control.owner is client:
+    def release(self, ctx: RequestContext) -> None:
+        client = ctx.client
+        if self.control.owner is client:
             log.info("control released by %s (%s)", self.control.owner_name, client.peer)
             self.control.release(client)
+            self._control_changed(client, ctx.now)
 
-    def _peer(self) -> str:
-        return self._client.peer if self._client is not None else "?"
+    def _control_changed(self, client: Client, now: float) -> None:
+        if self.on_control is not None:
+            self.on_control(self.control.owner_name, client.peer, now)
 
     # -- robot-wide safety --------------------------------------------------------------------
     def any_moving(self) -> bool:
         return any(s.state == "ok" and s.module.is_moving() for s in self.slots.values())
 
-    def stop_all(self, reason: str) -> None:
+    def stop_all(self, reason: str, now: float = 0.0) -> None:
         """Every attached module stops all motion; nothing is left for the watchdog."""
         self._stop_keep_trip(reason)
-        self.watchdog.disarm()
+        self.watchdog.disarm(now)
 
     def tick(self, now: float, dt: float) -> None:
         """Scheduler task: the watchdog timer."""
@@ -247,11 +225,11 @@ class RobotDistribution:
                         peer, now - self.watchdog.last_feed)
             self._stop_keep_trip("watchdog expired")
 
-    def stalled(self, reason: str) -> None:
+    def stalled(self, reason: str, now: float = 0.0) -> None:
         """The loop lost time (SPEC 2.2, stalls and freezes): every attached module stops and
         the watchdog reads `tripped` until the next accepted motion request."""
         self._stop_keep_trip(reason)
-        self.watchdog.trip()
+        self.watchdog.trip(reason, now)
 
     def protects(self, client: Client) -> bool:
         """The owner, and the feeder of an armed watchdog, keep their connection when the
@@ -259,24 +237,31 @@ class RobotDistribution:
         return self.control.owner is client or (
             self.watchdog.state == "armed" and self.watchdog.feeder is client)
 
-    def client_lost(self, client: Client) -> None:
+    def client_lost(self, client: Client, now: float = 0.0) -> None:
+        self.changes += 1
         if self.control.owner is client:
             log.info("control released: owner %s (%s) disconnected",
                      self.control.owner_name, client.peer)
             self.control.release(client)
-        if self.watchdog.client_lost(client):
+            self._control_changed(client, now)
+        if self.watchdog.client_lost(client, now):
             log.warning("watchdog tripped: commanding client %s disconnected; stopping every"
                         " module", client.peer)
             self._stop_keep_trip("commanding client lost")
 
     def _stop_keep_trip(self, reason: str) -> None:
         """Every attached module stops; the watchdog state is left to the caller."""
+        self.changes += 1
         for slot in self.slots.values():
             if slot.state == "ok":
-                try:
-                    slot.module.stop()
-                except Exception:
-                    log.exception("module %s failed to stop (%s)", slot.name, reason)
+                self._stop(slot.module, reason)
+
+    @staticmethod
+    def _stop(module: Module, reason: str) -> None:
+        try:
+            module.stop()
+        except Exception:
+            log.exception("module %s failed to stop (%s)", module.name, reason)
 
     # -- health -------------------------------------------------------------------------------
     def health_rows(self) -> list[Response]:

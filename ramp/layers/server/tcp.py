@@ -1,5 +1,10 @@
 """Server layer: non-blocking MCP over TCP, serviced by the scheduler between ticks.
 
+This layer owns framing and parsing: it splits a client's bytes into messages, parses each
+one (`ramp.mcp.protocol`) and hands it down to the robot distribution layer as requests with
+a `RequestContext` (the client and the time the message was taken up), then writes the one
+answer line back. It decides nothing about the robot.
+
 One response line per request line, in order, per client. A client that stops reading is
 cut off once its unsent output passes a bound, so it can never block the loop or grow memory.
 Work is bounded by time (SPEC 2.2, *Bounded work*): a client's turn reads at most one small
@@ -17,11 +22,17 @@ import functools
 import logging
 import socket
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable
 
-from ramp.layers.robot_distribution import Client
-from ramp.mcp.messages import Response, error_response
-from ramp.mcp.protocol import LineSplitter, TooLong, format_response
+from ramp.layers.robot_distribution import Client, RequestContext, RobotDistribution
+from ramp.mcp.messages import Request, error_response
+from ramp.mcp.protocol import (
+    LineSplitter,
+    TooLong,
+    format_response,
+    parse_message,
+    too_long_response,
+)
 from ramp.scheduler import Scheduler
 
 log = logging.getLogger("ramp.server")
@@ -45,10 +56,13 @@ _OUT_OF_FDS = (errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM)
 #: each bus's port (a pty or USB adapter, a CAN socket, a vendor library's own).
 FD_RESERVE = 32
 FD_PER_BUS = 4
+#: Messages up to this long are kept parsed (at most this many), keyed by their bytes.
+PARSE_CACHE_LINE = 256
+PARSE_CACHE_SIZE = 512
 
 
 class Connection(Client):
-    """One TCP client: its socket, input splitter and pending output."""
+    """One TCP client: its socket, input splitter, the message being answered, output."""
 
     def __init__(self, sock: socket.socket, peer: str, max_line: int, now: float) -> None:
         super().__init__(peer)
@@ -59,48 +73,59 @@ class Connection(Client):
         self.splitter = LineSplitter(max_line)
         #: Complete messages read and not yet answered, oldest first.
         self.queue: deque[bytes | TooLong] = deque()
-        #: The message being answered: its remaining steps and its answer so far (formatted
-        #: step by step, so no single step formats thousands of responses).
-        self.steps: Iterator[list[Response]] | None = None
+        #: The message being answered, request by request: its context, its requests, the
+        #: next one's index, the answer so far and what ends it (a syntax error, or nothing).
+        self.ctx: RequestContext | None = None
+        self.requests: tuple[Request, ...] = ()
+        self.index = 0
         self.answer: list[bytes] = []
+        self.tail = b""
         self.out = bytearray()
+        self.writing = False  # registered as a writer: output is waiting for room
         self.closed = False
         #: The client sent FIN: nothing more to read, answers still to deliver.
         self.input_ended = False
         self.lost_reported = False
 
 
-#: One message -> its answer, one step per request (responses, possibly none, per step), so
-#: the server can stop between requests when the tick is due.
-Handler = Callable[[Connection, "bytes | TooLong"], Iterable[list[Response]]]
+#: Observer hooks: (client, clock time, the message as it arrived, or TooLong) for every
+#: complete message in, and (client, clock time, the answer line) for every line out.
+MessageInHook = Callable[[Client, float, "bytes | TooLong"], None]
+MessageOutHook = Callable[[Client, float, bytes], None]
 
 
 class McpServer:
-    """Accepts clients, splits their bytes into messages and writes the answers back."""
+    """Accepts clients, frames and parses their messages, hands each one down to the robot
+    layer with its request context, and writes the answers back."""
 
-    def __init__(self, scheduler: Scheduler, handler: Handler,
-                 on_disconnect: Callable[[Connection], None], host: str = "127.0.0.1",
-                 port: int = 5577, max_clients: int = 8, max_line: int = 4096,
-                 max_output: int = 1 << 20,
-                 protected: Callable[[Connection], bool] | None = None) -> None:
+    def __init__(self, scheduler: Scheduler, robot: RobotDistribution,
+                 host: str = "127.0.0.1", port: int = 5577, max_clients: int = 8,
+                 max_line: int = 4096, max_output: int = 1 << 20) -> None:
         self.scheduler = scheduler
-        self.handler = handler
-        self.on_disconnect = on_disconnect
-        #: True for a client that must never be evicted (the owner, the feeder).
-        self.protected = protected or (lambda conn: False)
+        self.robot = robot
         self.host = host
         self.port = port
         self.max_clients = max_clients
         self.max_line = max_line
         self.max_output = max_output
+        # max_line already bounds a message's work; every well-formed one fits (>= 8 bytes)
+        self.max_requests = max(256, max_line // 8 + 1)
         self.clients: dict[int, Connection] = {}
         self.sock: socket.socket | None = None
         self.accepted = 0
         self.refused = 0
         self.evicted = 0
         self.accept_failures = 0
+        #: Observer hooks (the flight recorder): None costs nothing.
+        self.on_message_in: MessageInHook | None = None
+        self.on_message_out: MessageOutHook | None = None
         self._accept_paused_until: float | None = None
         self._accept_failures_logged = 0
+        self._now = scheduler.clock.now
+        self._too_long = format_response(too_long_response(max_line)).encode("ascii")
+        #: Parsed short messages by their bytes: parsing is a pure function of them, and a
+        #: client repeats the same few lines (a poll, a heartbeat) thousands of times.
+        self._parsed: dict[bytes, tuple[tuple[Request, ...], bytes]] = {}
 
     @property
     def address(self) -> tuple[str, int]:
@@ -119,14 +144,17 @@ class McpServer:
         sock.setblocking(False)
         self.sock = sock
         self.scheduler.add_reader(sock.fileno(), self._accept)
-        self.scheduler.add_task("server", self.scheduler.rate_hz, self._tick)
 
-    def _tick(self, now: float, dt: float) -> None:
+    def tick(self, now: float, dt: float) -> None:
         """Accept again once a back-off after running out of descriptors is over."""
         if self._accept_paused_until is not None and now >= self._accept_paused_until:
             self._accept_paused_until = None
             if self.sock is not None:
                 self.scheduler.add_reader(self.sock.fileno(), self._accept)
+
+    @property
+    def accept_paused(self) -> bool:
+        return self._accept_paused_until is not None
 
     def close(self) -> None:
         for conn in list(self.clients.values()):
@@ -170,7 +198,7 @@ class McpServer:
         complete message for EVICT_SILENCE_S and is neither the owner nor the feeder."""
         now = self.scheduler.clock.now()
         silent = [c for c in self.clients.values()
-                  if now - c.last_message_at >= EVICT_SILENCE_S and not self.protected(c)]
+                  if now - c.last_message_at >= EVICT_SILENCE_S and not self.robot.protects(c)]
         if not silent:
             return False
         victim = min(silent, key=lambda c: c.last_message_at)
@@ -202,8 +230,9 @@ class McpServer:
     # -- reading and answering ----------------------------------------------------------------
     def _readable(self, conn: Connection) -> None:
         """A client's turn: read one chunk unless work is left over, then answer in time."""
-        end = min(self.scheduler.io_deadline, self.scheduler.clock.now() + TURN_S)
-        if conn.steps is None and not conn.queue:
+        now = self._now()
+        end = min(self.scheduler.io_deadline, now + TURN_S)
+        if conn.ctx is None and not conn.queue:
             try:
                 data = conn.sock.recv(READ_CHUNK)
             except (BlockingIOError, InterruptedError):
@@ -216,49 +245,99 @@ class McpServer:
                 return
             messages = conn.splitter.feed(data)
             if messages:
-                conn.last_message_at = self.scheduler.clock.now()
+                conn.last_message_at = now
                 conn.queue.extend(messages)
         self._work(conn, end)
         if conn.closed:
             return
-        self.scheduler.set_pending(conn.fd, conn.steps is not None or bool(conn.queue))
+        self.scheduler.set_pending(conn.fd, conn.ctx is not None or bool(conn.queue))
         self._flush(conn)
+
+    def _parse(self, msg: bytes) -> tuple[tuple[Request, ...], bytes]:
+        """A message's requests and what ends its answer (a syntax error, or nothing)."""
+        parsed = self._parsed.get(msg)
+        if parsed is None:
+            requests, error = parse_message(msg, max_requests=self.max_requests)
+            tail = format_response(error).encode("ascii") if error is not None else b""
+            parsed = (requests, tail)
+            if len(msg) <= PARSE_CACHE_LINE:
+                if len(self._parsed) >= PARSE_CACHE_SIZE:
+                    self._parsed.clear()
+                self._parsed[msg] = parsed
+        return parsed
 
     def _work(self, conn: Connection, end: float) -> None:
         """Answer queued messages request by request until `end` (at least one step)."""
-        clock = self.scheduler.clock
-        while conn.steps is not None or conn.queue:
-            if conn.steps is None:
+        robot = self.robot
+        while True:
+            ctx = conn.ctx
+            if ctx is None:
+                if not conn.queue:
+                    return
                 msg = conn.queue.popleft()
-                conn.answer = []
-                try:
-                    conn.steps = iter(self.handler(conn, msg))
-                except Exception as exc:
-                    self._finish(conn, self._fault(conn, exc))
-                    continue
+                ctx = RequestContext(conn, self._now())
+                if self.on_message_in is not None:
+                    self.on_message_in(conn, ctx.now, msg)
+                robot.message(ctx)
+                if isinstance(msg, TooLong):
+                    self._finish(conn, ctx, self._too_long)
+                else:
+                    requests, tail = self._parse(msg)
+                    if len(requests) > 1:
+                        conn.ctx, conn.requests, conn.index, conn.answer, conn.tail = (
+                            ctx, requests, 0, [], tail)
+                        continue
+                    if requests:  # the common case, in one step and no list
+                        try:
+                            tail = robot.request(ctx, requests[0]) + tail
+                        except Exception as exc:
+                            tail = self._fault(conn, exc)
+                    self._finish(conn, ctx, tail)  # (a heartbeat: an empty line)
+                if conn.closed or self._now() >= end:
+                    return
+                continue
             try:
-                part = next(conn.steps, None)
-                if part is None:
-                    self._finish(conn)
-                elif part:
-                    conn.answer.append("".join([format_response(r) for r in part])
-                                       .encode("ascii"))
+                part = robot.request(ctx, conn.requests[conn.index])
             except Exception as exc:
-                # Whatever went wrong (a get property reading NaN, which MCP cannot carry),
-                # the message is owed one line: otherwise the client's lines slip out of step.
-                self._finish(conn, self._fault(conn, exc))
-            if conn.closed or clock.now() >= end:
+                # Whatever went wrong (a get property that raised), the message is owed one
+                # line: otherwise the client's lines slip out of step.
+                self._finish(conn, ctx, self._fault(conn, exc))
+            else:
+                conn.index += 1
+                if part:
+                    conn.answer.append(part)
+                if conn.index == len(conn.requests):
+                    conn.answer.append(conn.tail)
+                    self._finish(conn, ctx, b"".join(conn.answer))
+            if conn.closed or self._now() >= end:
                 return
 
-    def _finish(self, conn: Connection, instead: bytes | None = None) -> None:
-        """The message's one response line: its answer, or `instead` (a fault) alone."""
-        parts = conn.answer if instead is None else [instead]
-        conn.steps, conn.answer = None, []
-        if not conn.closed:
-            conn.out += b"".join(parts) + b"\n"
+    def _finish(self, conn: Connection, ctx: RequestContext, line: bytes) -> None:
+        """The message's one response line."""
+        conn.ctx, conn.requests, conn.answer = None, (), []
+        if conn.closed:
+            return
+        conn.out += line
+        conn.out += b"\n"
+        if self.on_message_out is not None:
+            self.on_message_out(conn, ctx.now, line)
 
-    def _fault(self, conn: Connection, exc: Exception) -> bytes:
-        log.error("could not answer a message from %s", conn.peer, exc_info=exc)
+    def answer_message(self, client: Client, msg: bytes | TooLong) -> bytes:
+        """One message's whole answer line (with its `\\n`), all at once, as a turn of the
+        server would write it: for tools and tests that have no socket."""
+        ctx = RequestContext(client, self._now())
+        self.robot.message(ctx)
+        if isinstance(msg, TooLong):
+            return self._too_long + b"\n"
+        requests, tail = self._parse(msg)
+        try:
+            parts = [self.robot.request(ctx, req) for req in requests]
+        except Exception as exc:
+            return self._fault(client, exc) + b"\n"
+        return b"".join(parts) + tail + b"\n"
+
+    def _fault(self, client: Client, exc: Exception) -> bytes:
+        log.error("could not answer a message from %s", client.peer, exc_info=exc)
         return format_response(error_response(
             "robot", "mcp", "fault", f"internal error {type(exc).__name__}")).encode("ascii")
 
@@ -279,23 +358,27 @@ class McpServer:
     def _flush(self, conn: Connection) -> None:
         if conn.closed:
             return
-        while conn.out:
+        out = conn.out
+        while out:
             try:
-                n = conn.sock.send(conn.out)
+                n = conn.sock.send(out)
             except (BlockingIOError, InterruptedError):
                 break
             except OSError as exc:
                 self._drop(conn, f"write error: {exc.strerror or exc}")
                 return
-            del conn.out[:n]
-        if len(conn.out) > self.max_output:
-            self._drop(conn, f"not reading its responses ({len(conn.out)} bytes unsent)")
+            del out[:n]
+        if len(out) > self.max_output:
+            self._drop(conn, f"not reading its responses ({len(out)} bytes unsent)")
             return
-        if conn.out:
-            self.scheduler.add_writer(conn.fd, functools.partial(self._flush, conn))
+        if out:
+            if not conn.writing:
+                conn.writing = True
+                self.scheduler.add_writer(conn.fd, functools.partial(self._flush, conn))
         elif conn.input_ended:
             self._drop(conn, "closed by client")
-        else:
+        elif conn.writing:
+            conn.writing = False
             self.scheduler.remove_writer(conn.fd)
 
     def _drop(self, conn: Connection, why: str, farewell: bytes = b"") -> None:
@@ -320,7 +403,7 @@ class McpServer:
         """Tell the robot layer once that this client can no longer command or feed."""
         if not conn.lost_reported:
             conn.lost_reported = True
-            self.on_disconnect(conn)
+            self.robot.client_lost(conn, self._now())
 
 
 def _say_and_close(sock: socket.socket, line: bytes) -> None:
