@@ -110,16 +110,24 @@ def stop_message(requests: Iterable[Request], known: Iterable[str]) -> str:
     return format_requests(Request(m, m, "stop") for m in modules).decode().rstrip("\n")
 
 
-def accepted_motion(requests: Iterable[Request], responses: Iterable[Response]
-                    ) -> list[Request]:
-    """The motion requests the robot did not refuse (errors echo module and device).
+def accepted_motion(requests: Iterable[Request], responses: Iterable[Response],
+                    catalog: Catalog | None = None) -> list[Request]:
+    """The requests that change something (not reads, as `catalog` says, or by name) that
+    the robot did not refuse (errors echo module and device).
 
     `hold` stops only these: a refused request (say `not_owner`) must not end with a stop
     that halts another client's motion.
     """
     refused = {(r.module, r.device) for r in responses if r.prop == "error"}
     return [r for r in requests
-            if r.function not in READ_FUNCTIONS and (r.module, r.device) not in refused]
+            if not _is_read(r, catalog) and (r.module, r.device) not in refused]
+
+
+def _is_read(r: Request, catalog: Catalog | None) -> bool:
+    """A read, as describe said (`kind`), or by its name for a robot that does not say."""
+    if catalog is None:
+        return r.function in READ_FUNCTIONS
+    return catalog.is_read(r.module, r.device, r.function)
 
 
 def watchdog_timeout(rows: Iterable[Response]) -> float | None:
@@ -385,7 +393,7 @@ class Shell:
         if not text:
             raise UsageError("usage: watch REQUEST [HZ]")
         requests = parse_requests(text)
-        writes = [r for r in requests if r.function not in READ_FUNCTIONS]
+        writes = [r for r in requests if not _is_read(r, self.catalog)]
         if not requests or writes:
             raise UsageError("watch only re-polls reads (get, describe, modules); "
                              "use hold for motion")
@@ -416,7 +424,7 @@ class Shell:
         if not text:
             raise UsageError("usage: hold REQUEST [SECONDS]")
         requests = parse_requests(text)
-        if not requests or all(r.function in READ_FUNCTIONS for r in requests):
+        if not requests or all(_is_read(r, self.catalog) for r in requests):
             raise UsageError("hold keeps a motion request alive; this one does not move "
                              "anything (use watch for reads)")
         try:
@@ -428,7 +436,8 @@ class Shell:
         tripped = False
         with Interrupt() as intr:
             responses, raw = self.ask_main(text)
-            stop = stop_message(accepted_motion(requests, responses), self.catalog.modules)
+            stop = stop_message(accepted_motion(requests, responses, self.catalog),
+                                self.catalog.modules)
             try:
                 if has_errors(responses):
                     self.show(responses, raw)

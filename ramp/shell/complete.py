@@ -9,7 +9,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from ramp.shell.render import READ_FUNCTIONS, Catalog, FunctionInfo
+from ramp.shell.render import Catalog, FunctionInfo
 
 #: Shell commands and what the completion menu says about them.
 SHELL_COMMANDS: dict[str, str] = {
@@ -90,7 +90,8 @@ def complete(before: str, catalog: Catalog) -> list[Candidate]:
         module, dev, word = m.groups()
         return [Candidate(_insert(fn), -len(word), fn.name, fn.hint)
                 for fn in catalog.functions_of(module, dev)
-                if fn.name.startswith(word) and (not reads_only or fn.name in READ_FUNCTIONS)]
+                if fn.name.startswith(word)
+                and (not reads_only or catalog.is_read(module, dev, fn.name))]
     return []
 
 
@@ -102,7 +103,8 @@ def _insert(fn: FunctionInfo) -> str:
 def _offers(catalog: Catalog, module: str, device: str | None, reads_only: bool) -> bool:
     if not reads_only:
         return True
-    return any(fn.name in READ_FUNCTIONS and (device is None or fn.device == device)
+    return any(catalog.is_read(module, fn.device, fn.name)
+               and (device is None or fn.device == device)
                for fn in catalog.functions.get(module, ()))
 
 
