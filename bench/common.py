@@ -150,7 +150,8 @@ class Child:
     """A process we started: line protocol on its stdout, stderr into a log file."""
 
     def __init__(self, name: str, argv: Sequence[str], workdir: Path,
-                 stdin: bool = False, cpu: int | None = None) -> None:
+                 stdin: bool = False, cpu: int | None = None,
+                 env: dict[str, str] | None = None) -> None:
         self.name = name
         self.log_path = workdir / f"{name}-{len(_CHILDREN)}.log"
         self._log = open(self.log_path, "wb")  # noqa: SIM115 - closed in wait()/kill()
@@ -158,6 +159,7 @@ class Child:
         self.proc = subprocess.Popen(
             list(argv), cwd=REPO, stdout=subprocess.PIPE, stderr=self._log,
             stdin=subprocess.PIPE if stdin else subprocess.DEVNULL,
+            env=None if env is None else {**os.environ, **env},
             # Pinned before exec, so every thread the child starts inherits the core.
             preexec_fn=None if cpu is None else functools.partial(os.sched_setaffinity, 0, {cpu}))
         _CHILDREN.append(self)
@@ -266,14 +268,17 @@ atexit.register(kill_all)
 
 
 def start_supervisor(name: str, config: Path, workdir: Path, timeout: float = 30.0,
-                     cpu: int | None = None) -> tuple[Child, int, Path]:
-    """The supervisor as `ramp run --sim`, with the bench's observation hooks (bench.child).
+                     cpu: int | None = None, real: bool = False,
+                     env: dict[str, str] | None = None) -> tuple[Child, int, Path]:
+    """The supervisor as `ramp run --sim` (`real`: without `--sim`), watched by the bench's
+    observer (bench.child).
 
-    Returns the child, its MCP port and the file it writes its tick samples and driver
-    statistics to when it exits."""
+    Returns the child, its MCP port and the file it writes its tick samples, task costs and
+    driver statistics to when it exits."""
     dump = workdir / f"{name}-{len(_CHILDREN)}.json"
     child = Child(name, [PYTHON, "-m", "bench.child", "supervisor", "--config", str(config),
-                         "--dump", str(dump)], workdir, cpu=cpu)
+                         "--dump", str(dump), *(["--real"] if real else [])], workdir,
+                  cpu=cpu, env=env)
     try:
         m = child.expect(r"ramp: ready on ([\d.]+):(\d+)", timeout)
     except BaseException:
@@ -319,13 +324,17 @@ def load_marte() -> dict[str, Any]:
 
 
 def write_config(workdir: Path, name: str, *, base_port: str | None = None,
-                 watchdog_timeout: float | None = None) -> Path:
-    """ramp.yaml served on 127.0.0.1:0; `base_port` makes base_motors a real driver on it."""
+                 watchdog_timeout: float | None = None,
+                 ports: dict[str, str] | None = None) -> Path:
+    """ramp.yaml served on 127.0.0.1:0; `base_port` makes base_motors a real driver on it
+    (under --sim); `ports` moves buses to other ports (bus name -> port)."""
     data = load_marte()
     data["server"]["host"] = "127.0.0.1"
     data["server"]["port"] = 0
     if base_port is not None:
         data["buses"]["base_motors"].update(port=base_port, sim=False)
+    for bus, port in (ports or {}).items():
+        data["buses"][bus]["port"] = port
     if watchdog_timeout is not None:
         data["watchdog"]["timeout"] = watchdog_timeout
     path = workdir / f"{name}.yaml"

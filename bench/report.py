@@ -47,15 +47,29 @@ def render(doc: dict[str, Any]) -> str:
     if t and "error" not in t:
         out += [f"**tick** ({t['rate_hz']:g} Hz, {t['duration_s']:g} s each; baseline: bare "
                 "select loop running beside it)", "", HEAD]
-        for run in ("idle", "loaded"):
-            r = t[run]
-            label = "idle" if run == "idle" else "4 clients polling"
+        labels = {"idle": "idle", "loaded": "4 clients polling",
+                  "real_drivers_idle": "real drivers, idle"}
+        for run, label in labels.items():
+            r = t.get(run)
+            if r is None:
+                continue
             out += _pcts(f"{label}: lateness", r["late_us"], " µs")
             out += [_row(f"{label}: overruns", r["overruns"]),
                     _row(f"{label}: CPU % of a core", r["cpu_pct"])]
+            if "tick_cost_us" in r:
+                out.append(_row(f"{label}: tasks per tick, mean", r["tick_cost_us"], " µs"))
         rtt = t["loaded"]["load"]["rtt_us"]
         out += ["", f"Polling clients' round trip (base.get + ble.get): p50 {_num(rtt['p50'])} "
-                f"µs, p99 {_num(rtt['p99'])} µs, max {_num(rtt['max'])} µs.", ""]
+                f"µs, p99 {_num(rtt['p99'])} µs, max {_num(rtt['max'])} µs. The tasks' "
+                "baseline is one iteration of the bare loop (its CPU over its iterations).",
+                ""]
+        tasks = t["idle"].get("tasks")
+        if tasks:
+            out += ["Tasks of an idle tick (`ramp run --sim`, mean / max per run):", "",
+                    "| task | runs | mean | max |", "|---|---|---|---|"]
+            out += [f"| {name} | {v['runs']:,} | {_num(v['mean_us'])} µs | "
+                    f"{_num(v['max_us'])} µs |" for name, v in tasks.items()]
+            out.append("")
     r = doc.get("round_trip")
     if r and "error" not in r:
         out += [f"**round_trip** (`{r['request']}`, {r['response_bytes']}-byte answer; "

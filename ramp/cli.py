@@ -109,11 +109,12 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
     backplane = None
     try:  # building drivers and modules checks what the config check cannot see
         if sim:
-            from ramp.simulation.backplane import (
-                SimBackplane,  # the one place ramp/ reaches firmware_like/
+            from ramp.simulation.backplane import (  # the one place ramp/ reaches firmware_like/
+                RUN_PHYSICS_HZ,
+                SimBackplane,
             )
 
-            backplane = SimBackplane(config)
+            backplane = SimBackplane(config, physics_hz=RUN_PHYSICS_HZ, read_in_wait=False)
             sup = build(config, clock, backplane.bus_factory, host=host, port=port,
                         observer=observer)
             backplane.attach(sup)

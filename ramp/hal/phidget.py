@@ -200,6 +200,9 @@ class PhidgetBus(Bus):
         self._slots: list[_Slot] = []
         self._queue: queue.SimpleQueue[Event] = queue.SimpleQueue()
         self._opened_at = 0.0
+        #: Some channel needs the per-channel pass of `_tick` (attaching, not heard from, an
+        #: output not yet as commanded); idle ticks skip it.
+        self._care = True
         #: Error events seen, per Phidget22 error-event code (for health reports and tests).
         self.error_counts: dict[int, int] = {}
 
@@ -228,6 +231,7 @@ class PhidgetBus(Bus):
         q: queue.SimpleQueue[Event] = queue.SimpleQueue()
         self._queue = q
         self._opened_at = now
+        self._care = True
         for slot in self._slots:
             slot.attached = False
             slot.value = None
@@ -317,15 +321,27 @@ class PhidgetBus(Bus):
             except queue.Empty:
                 break
             self._handle(self._slots[idx], event, payload, now)
+        if not self._care:
+            return  # every channel attached and heard, every output as commanded
+        care = False
         for idx, slot in enumerate(self._slots):
             if slot.kind == "digital_in" and slot.attached and not slot.heard:
                 self._seed(slot)
+                care = care or not slot.heard
             elif slot.kind == "digital_out":
                 self._flush(slot, idx, now)
-        if not self.ready() and now - self._opened_at > self.attach_timeout:
+                care = care or slot.sent != slot.want
+        ready = self.ready()
+        if not ready and now - self._opened_at > self.attach_timeout:
             raise self._timeout_error()
+        self._care = care or not ready
+
+    def _output_changed(self, ch: DigitalOutput) -> None:
+        self._care = True  # the tick hands the new state to the library
 
     def _handle(self, slot: _Slot, event: str, payload: Any, now: float) -> None:
+        if event != _SAMPLE or not slot.heard:
+            self._care = True  # something to look at in this tick's per-channel pass
         if event == _SAMPLE:
             if slot.kind == "bridge_in":
                 slot.value = float(payload) * 1000.0  # V/V -> mV/V

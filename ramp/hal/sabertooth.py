@@ -32,9 +32,9 @@ for the OS buffer; both still charge their bytes to the budget.
 
 Errors: a write that fails inside `set_duty` is remembered (`failure`) and raised by the
 next `tick` as a `DeviceError` naming the bus (a request handler never sees an I/O
-exception). A Sabertooth never talks back, so a readable port means a hang-up: when the loop
-watches `fileno()` that is noticed the moment it happens (`drain`), otherwise `tick` polls
-for it, so an unplugged adapter is noticed within one tick either way.
+exception). A Sabertooth never talks back, so a readable port means a hang-up: `tick` looks
+for one (a zero-timeout `select`), so an unplugged adapter is noticed within one tick. (The
+port is not in the loop's wait: the kernel would poll the tty at every request answered.)
 
 Every packet a channel can send is built once, when the channel is (`SabertoothMotor`), with
 the codec's checks; sending is then a table lookup.
@@ -239,8 +239,7 @@ class SabertoothBus(Bus):
         elapsed = max(0.0, now - self._refilled_at)
         self._tokens = min(float(BURST_BYTES), self._tokens + self.rate * elapsed)
         self._refilled_at = now
-        if self._fd is not None and not self.watched:
-            self._check_alive()  # nobody watches the port for a hang-up: look now
+        self._check_alive()
         if self._pending or self._tail or now >= self._next_due():
             self._pump()
         if self.failure is not None:
@@ -255,14 +254,8 @@ class SabertoothBus(Bus):
             self._due_at = min(refresh, program)
         return self._due_at
 
-    def fileno(self) -> int | None:
-        """The port's descriptor, so the loop notices a hang-up the moment it happens."""
-        return self._fd
-
-    def on_readable(self, now: float) -> None:
-        """A Sabertooth never talks: input is a hang-up (or line noise, read and dropped)."""
-        with contextlib.suppress(DeviceError):  # kept in `failure`, raised by the next tick
-            self._check_alive()
+    # No `fileno()` for the loop to watch: a tty in the loop's wait is polled by the kernel
+    # at every wake-up (every request answered), which costs more than one look per tick.
 
     def _stop_motors(self) -> None:
         """Zeros for every channel, written now whatever the budget: stopping is a safety

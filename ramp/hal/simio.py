@@ -24,7 +24,11 @@ from ramp.schema import Field
 
 
 class SimWorld(Protocol):
-    """What a simulated world offers the sim driver; signals are named `module.device`."""
+    """What a simulated world offers the sim driver; signals are named `module.device`.
+
+    A world may also have an int `revision` that moves on whenever what it reads back may
+    have changed (the MARTE model: each step); the driver then samples only when it moved.
+    Without one, every tick samples."""
 
     def set_motor(self, name: str, duty: float) -> None: ...
     def read_analog(self, name: str) -> float: ...
@@ -93,6 +97,7 @@ class SimBus(Bus):
             raise DeviceError(name, "the sim driver runs only under `ramp run --sim`")
         self.world = world
         self.inputs: list[_Input] = []
+        self._sampled: int | None = None  # the world's revision the inputs hold
 
     def _make_channel(self, kind: str, label: str, spec: dict[str, Any]) -> Any:
         ch = _CLASSES[kind](self, label)
@@ -103,6 +108,7 @@ class SimBus(Bus):
     def _open(self, now: float) -> None:
         if not self.world.bus_present(self.name):
             raise DeviceError(self.name, "simulated device unplugged")
+        self._sampled = None
         for m in self.motors:
             self.world.set_motor(m.label, m.duty)
         for o in self.outputs:
@@ -116,8 +122,12 @@ class SimBus(Bus):
 
     def _sample(self) -> None:
         world = self.world
+        revision = getattr(world, "revision", None)
+        if revision is not None and revision == self._sampled:
+            return
         for ch in self.inputs:
             ch.sample(world)
+        self._sampled = revision
 
     def _motor_changed(self, ch: MotorChannel) -> None:
         self.world.set_motor(ch.label, ch.duty)

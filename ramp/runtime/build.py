@@ -63,9 +63,6 @@ def build(config: Config, clock: Clock | None = None, bus_factory: BusFactory | 
     registry = ModuleRegistry(slots)
 
     # The layers call back into the supervisor, which is made last (it holds them all).
-    def ticks() -> int:
-        return scheduler.stats.ticks
-
     def health() -> Health:
         return sup.health()
 
@@ -73,7 +70,8 @@ def build(config: Config, clock: Clock | None = None, bus_factory: BusFactory | 
         sup.buses_changed(now)
 
     manager = BusManager(buses, scheduler, buses_changed)
-    robot = RobotDistribution(registry, Watchdog(config.watchdog_timeout), health, ticks)
+    robot = RobotDistribution(registry, Watchdog(config.watchdog_timeout), health,
+                              scheduler.stats)
     server = McpServer(scheduler, robot,
                        host=host if host is not None else config.server.host,
                        port=port if port is not None else config.server.port,

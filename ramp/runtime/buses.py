@@ -70,9 +70,9 @@ class BusManager:
         """Open every bus, in parallel (each open has its own thread); missing ones are
         retried later."""
         for name, bus in self.buses.items():
-            self._try_open(name, bus, now, quiet=True)
+            self._try_open(name, bus, now)
         for name, bus in self.buses.items():
-            if self.opener.busy(name):
+            if self.opener.busy(name):  # a second look once all have started
                 self._try_open(name, bus, now)
         self._refresh(now, force=True)
 
@@ -162,14 +162,10 @@ class BusManager:
         if changed:
             self._on_change(now)
 
-    def _try_open(self, name: str, bus: Bus, now: float, quiet: bool = False) -> bool:
+    def _try_open(self, name: str, bus: Bus, now: float) -> bool:
         """Open a bus without holding the loop (see `ramp.runtime.bus_opener`); True once it
-        is open. A failure waits RETRY_PERIOD before the next try; an open still running is
-        looked at again on the next tick. `quiet`: start it and do not wait (the others start
-        too)."""
-        if quiet and not self.opener.inline:
-            self.opener.open(name, bus, now)
-            return False
+        is open (and watched). A failure waits RETRY_PERIOD before the next try; an open still
+        running is looked at again on the next tick."""
         result = self.opener.open(name, bus, now)
         if result is False:
             return False

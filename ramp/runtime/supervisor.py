@@ -99,7 +99,6 @@ class Supervisor:
                 sched.add_task(f"{slot.name}.{task.name}", rate,
                                _only_attached(slot, task.run))
         self.server.start()
-        sched.add_task("server", sched.rate_hz, self.server.tick)
         self.running = True
         if self.observer is not None:
             self.observer.started(self)

@@ -21,6 +21,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, Protocol
 
 from ramp.errors import RequestError
 from ramp.layers.module_distribution import Function, Module
@@ -48,6 +49,16 @@ class Health:
     late_us: tuple[float, float, float]
     overruns: int
     clients: int
+
+
+class TickCount(Protocol):
+    """Whatever counts the scheduler's ticks (its `TickStats`)."""
+
+    ticks: int
+
+
+class _NoTicks:
+    ticks = 0
 
 
 def _error(req: Request, code: str, detail: str) -> bytes:
@@ -108,14 +119,14 @@ class RobotDistribution:
     """Routes each request of a message and applies watchdog and arbitration rules."""
 
     def __init__(self, registry: ModuleRegistry, watchdog: Watchdog,
-                 health: Callable[[], Health], ticks: Callable[[], int] = lambda: 0) -> None:
+                 health: Callable[[], Health], ticks: TickCount | None = None) -> None:
         self.registry = registry
         self.slots: dict[str, ModuleSlot] = registry.slots
         self.watchdog = watchdog
         self.control = Control()
         self._health = health
-        #: The scheduler's tick count (the runtime passes it): half of the state's version.
-        self._ticks = ticks
+        #: The scheduler's tick count (the runtime passes its TickStats): half of the version.
+        self._ticks = ticks if ticks is not None else _NoTicks()
         #: State changes made outside a tick (see the module docstring).
         self.changes = 0
         self.robot = RobotRequests(self)
@@ -124,37 +135,40 @@ class RobotDistribution:
 
     @property
     def version(self) -> Version:
-        return (self._ticks(), self.changes)
+        return (self._ticks.ticks, self.changes)
 
     # -- messages -----------------------------------------------------------------------------
     def message(self, ctx: RequestContext) -> None:
         """A complete message arrived (any message: heartbeat, erroneous or too long): it
         feeds the watchdog if its sender is the feeder, before its requests are handled."""
-        self.watchdog.feed(ctx.client, ctx.now)
+        watchdog = self.watchdog
+        if watchdog.state == "armed":
+            watchdog.feed(ctx.client, ctx.now)
 
     def request(self, ctx: RequestContext, req: Request) -> bytes:
         """One request: its answer as it goes on the wire (b"" for an accepted action)."""
-        if req.module == "robot":
+        module = req.module
+        if module == "robot":
             target: Module = self.robot
         else:
-            slot = self.slots.get(req.module)
-            if slot is None:
-                known = " ".join(["robot", *self.slots])
-                return _error(req, "unknown_module", f"no module {req.module}; known: {known}")
-            if slot.state != "ok":
-                if req.device == req.module and req.function == "stop" and not req.params:
-                    return b""  # its motion is already stopped
-                code = "not_attached" if slot.state == "detached" else "fault"
-                return _error(req, code, f"module {slot.name} is {slot.state}: {slot.reason}")
+            slot = self.slots.get(module)
+            if slot is None or slot.state != "ok":
+                return self._unusable(req, slot)
             target = slot.module
-        try:
-            fn, values = target.lookup(req)
-        except RequestError as exc:
-            return _error(req, exc.code, exc.detail)
+        fn = target.functions.get((req.device, req.function))
+        if fn is not None and not fn.params and not req.params:
+            values: list[Any] = []  # the common case: nothing to convert
+        else:
+            try:
+                fn, values = target.lookup(req)
+            except RequestError as exc:
+                return _error(req, exc.code, exc.detail)
         kind = fn.kind
         if kind == "read":
             line = fn.line
-            return line(self.version) if line is not None else answer(fn.run(*values))
+            if line is not None:
+                return line((self._ticks.ticks, self.changes))
+            return answer(fn.run(*values))
         if (kind == "motion" or kind == "state") and not self.control.may_command(ctx.client):
             return _error(req, "not_owner", f"control is held by {self.control.owner_name}")
         self.changes += 1
@@ -175,6 +189,16 @@ class RobotDistribution:
         elif kind == "stop" and not self.any_moving():
             self.watchdog.disarm(ctx.now)
         return answer(result) if result else b""
+
+    def _unusable(self, req: Request, slot: ModuleSlot | None) -> bytes:
+        """A request to a module that is unknown, or not attached (SPEC 2's order)."""
+        if slot is None:
+            known = " ".join(["robot", *self.slots])
+            return _error(req, "unknown_module", f"no module {req.module}; known: {known}")
+        if req.device == req.module and req.function == "stop" and not req.params:
+            return b""  # its motion is already stopped
+        code = "not_attached" if slot.state == "detached" else "fault"
+        return _error(req, code, f"module {slot.name} is {slot.state}: {slot.reason}")
 
     # -- robot-level functions ----------------------------------------------------------------
     def list_modules(self) -> list[Response]:

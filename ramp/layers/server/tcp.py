@@ -33,7 +33,7 @@ from ramp.mcp.protocol import (
     parse_message,
     too_long_response,
 )
-from ramp.scheduler import Scheduler
+from ramp.scheduler import ScheduledTask, Scheduler
 
 log = logging.getLogger("ramp.server")
 
@@ -120,8 +120,10 @@ class McpServer:
         self.on_message_in: MessageInHook | None = None
         self.on_message_out: MessageOutHook | None = None
         self._accept_paused_until: float | None = None
+        self._resume_task: ScheduledTask | None = None
         self._accept_failures_logged = 0
         self._now = scheduler.clock.now
+        self._pending_fds = scheduler.pending
         self._too_long = format_response(too_long_response(max_line)).encode("ascii")
         #: Parsed short messages by their bytes: parsing is a pure function of them, and a
         #: client repeats the same few lines (a poll, a heartbeat) thousands of times.
@@ -145,10 +147,14 @@ class McpServer:
         self.sock = sock
         self.scheduler.add_reader(sock.fileno(), self._accept)
 
-    def tick(self, now: float, dt: float) -> None:
-        """Accept again once a back-off after running out of descriptors is over."""
+    def _resume_accepting(self, now: float, dt: float) -> None:
+        """Scheduler task while accepting is paused: accept again once the back-off after
+        running out of descriptors is over (the task then removes itself)."""
         if self._accept_paused_until is not None and now >= self._accept_paused_until:
             self._accept_paused_until = None
+            if self._resume_task is not None:
+                self.scheduler.remove_task(self._resume_task)
+                self._resume_task = None
             if self.sock is not None:
                 self.scheduler.add_reader(self.sock.fileno(), self._accept)
 
@@ -219,6 +225,9 @@ class McpServer:
         assert self.sock is not None
         self.scheduler.remove_reader(self.sock.fileno())
         self._accept_paused_until = self.scheduler.clock.now() + ACCEPT_BACKOFF_S
+        if self._resume_task is None:
+            self._resume_task = self.scheduler.add_task(
+                "server.accept", self.scheduler.rate_hz, self._resume_accepting)
         if self.accept_failures - self._accept_failures_logged >= 100 or \
                 self._accept_failures_logged == 0:
             log.error("accept failed: %s (%d clients connected); new clients wait in the "
@@ -247,10 +256,12 @@ class McpServer:
             if messages:
                 conn.last_message_at = now
                 conn.queue.extend(messages)
-        self._work(conn, end)
+        self._work(conn, now, end)
         if conn.closed:
             return
-        self.scheduler.set_pending(conn.fd, conn.ctx is not None or bool(conn.queue))
+        more = conn.ctx is not None or bool(conn.queue)
+        if more or conn.fd in self._pending_fds:
+            self.scheduler.set_pending(conn.fd, more)
         self._flush(conn)
 
     def _parse(self, msg: bytes) -> tuple[tuple[Request, ...], bytes]:
@@ -266,50 +277,61 @@ class McpServer:
                 self._parsed[msg] = parsed
         return parsed
 
-    def _work(self, conn: Connection, end: float) -> None:
-        """Answer queued messages request by request until `end` (at least one step)."""
+    def _work(self, conn: Connection, t: float, end: float) -> None:
+        """Answer queued messages request by request until `end` (at least one step).
+
+        A message of one request (or none) is one step; a longer one is answered a request
+        per step across turns (`conn.ctx` holds it meanwhile). Everything is looked up once
+        per turn: this loop runs for every message a client sends."""
         robot = self.robot
+        request, message, parse, now = robot.request, robot.message, self._parse, self._now
+        queue, out = conn.queue, conn.out
+        hook_in, hook_out = self.on_message_in, self.on_message_out
         while True:
             ctx = conn.ctx
-            if ctx is None:
-                if not conn.queue:
-                    return
-                msg = conn.queue.popleft()
-                ctx = RequestContext(conn, self._now())
-                if self.on_message_in is not None:
-                    self.on_message_in(conn, ctx.now, msg)
-                robot.message(ctx)
-                if isinstance(msg, TooLong):
-                    self._finish(conn, ctx, self._too_long)
+            if ctx is not None:  # a message of several requests, one per step
+                try:
+                    part = request(ctx, conn.requests[conn.index])
+                except Exception as exc:
+                    # Whatever went wrong (a get property that raised), the message is owed
+                    # one line: otherwise the client's lines slip out of step.
+                    self._finish(conn, ctx, self._fault(conn, exc))
                 else:
-                    requests, tail = self._parse(msg)
-                    if len(requests) > 1:
-                        conn.ctx, conn.requests, conn.index, conn.answer, conn.tail = (
-                            ctx, requests, 0, [], tail)
-                        continue
-                    if requests:  # the common case, in one step and no list
-                        try:
-                            tail = robot.request(ctx, requests[0]) + tail
-                        except Exception as exc:
-                            tail = self._fault(conn, exc)
-                    self._finish(conn, ctx, tail)  # (a heartbeat: an empty line)
-                if conn.closed or self._now() >= end:
-                    return
-                continue
-            try:
-                part = robot.request(ctx, conn.requests[conn.index])
-            except Exception as exc:
-                # Whatever went wrong (a get property that raised), the message is owed one
-                # line: otherwise the client's lines slip out of step.
-                self._finish(conn, ctx, self._fault(conn, exc))
+                    conn.index += 1
+                    if part:
+                        conn.answer.append(part)
+                    if conn.index == len(conn.requests):
+                        conn.answer.append(conn.tail)
+                        self._finish(conn, ctx, b"".join(conn.answer))
             else:
-                conn.index += 1
-                if part:
-                    conn.answer.append(part)
-                if conn.index == len(conn.requests):
-                    conn.answer.append(conn.tail)
-                    self._finish(conn, ctx, b"".join(conn.answer))
-            if conn.closed or self._now() >= end:
+                if not queue:
+                    return
+                msg = queue.popleft()
+                ctx = RequestContext(conn, t)
+                if hook_in is not None:
+                    hook_in(conn, t, msg)
+                message(ctx)
+                if isinstance(msg, TooLong):
+                    line = self._too_long
+                else:
+                    requests, line = parse(msg)  # line: what ends the answer (an error or b"")
+                    if len(requests) == 1:
+                        try:
+                            line = request(ctx, requests[0]) + line
+                        except Exception as exc:
+                            line = self._fault(conn, exc)
+                    elif requests:
+                        conn.ctx, conn.requests, conn.index, conn.answer, conn.tail = (
+                            ctx, requests, 0, [], line)
+                        continue
+                out += line
+                out += b"\n"
+                if hook_out is not None:
+                    hook_out(conn, t, line)
+                if not queue:
+                    return  # (the usual turn: one message, answered)
+            t = now()
+            if t >= end or conn.closed:
                 return
 
     def _finish(self, conn: Connection, ctx: RequestContext, line: bytes) -> None:
@@ -359,6 +381,18 @@ class McpServer:
         if conn.closed:
             return
         out = conn.out
+        if out and not conn.writing and not conn.input_ended:  # the usual case: it all goes
+            try:
+                n = conn.sock.send(out)
+            except (BlockingIOError, InterruptedError):
+                n = 0
+            except OSError as exc:
+                self._drop(conn, f"write error: {exc.strerror or exc}")
+                return
+            if n == len(out):
+                out.clear()
+                return
+            del out[:n]
         while out:
             try:
                 n = conn.sock.send(out)
