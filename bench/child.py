@@ -35,11 +35,12 @@ def supervisor(args: argparse.Namespace) -> int:
     from ramp.runtime import Observer, Supervisor
 
     samples: list[tuple[float, float, int]] = []
+    busy: list[tuple[float, float]] = []
     at_exit: dict[str, object] = {}
 
     class BenchObserver(Observer):
-        """Every tick's lateness with its time; at shutdown, the drivers' counters and what
-        each task cost (neither is exposed over MCP)."""
+        """Every tick's lateness and cost with its time; at shutdown, the drivers' counters
+        and what each task cost (neither is exposed over MCP)."""
 
         sup: Supervisor | None = None
 
@@ -49,6 +50,9 @@ def supervisor(args: argparse.Namespace) -> int:
         def tick(self, t: float, late_s: float) -> None:
             overruns = self.sup.scheduler.stats.overruns if self.sup is not None else 0
             samples.append((time.monotonic(), late_s * 1e6, overruns))
+
+        def tick_done(self, t: float, busy_s: float) -> None:
+            busy.append((time.monotonic(), busy_s * 1e6))
 
         def stopping(self, supervisor: Supervisor) -> None:
             at_exit["bus_stats"] = {name: dict(bus.stats) for name, bus in
@@ -63,7 +67,8 @@ def supervisor(args: argparse.Namespace) -> int:
     if not args.real:
         argv.append("--sim")
     code = ramp.cli.main(argv, observer=BenchObserver())
-    Path(args.dump).write_text(json.dumps({"exit": code, "samples": samples, **at_exit}))
+    Path(args.dump).write_text(json.dumps({"exit": code, "samples": samples, "busy": busy,
+                                           **at_exit}))
     return code
 
 

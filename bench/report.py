@@ -56,12 +56,14 @@ def render(doc: dict[str, Any]) -> str:
             out += _pcts(f"{label}: lateness", r["late_us"], " µs")
             out += [_row(f"{label}: overruns", r["overruns"]),
                     _row(f"{label}: CPU % of a core", r["cpu_pct"])]
-            if "tick_cost_us" in r:
-                out.append(_row(f"{label}: tasks per tick, mean", r["tick_cost_us"], " µs"))
+            if "tick_busy_us" in r:
+                out += _pcts(f"{label}: tick cost", r["tick_busy_us"], " µs",
+                             ("p50", "p99", "mean"))
         rtt = t["loaded"]["load"]["rtt_us"]
         out += ["", f"Polling clients' round trip (base.get + ble.get): p50 {_num(rtt['p50'])} "
-                f"µs, p99 {_num(rtt['p99'])} µs, max {_num(rtt['max'])} µs. The tasks' "
-                "baseline is one iteration of the bare loop (its CPU over its iterations).",
+                f"µs, p99 {_num(rtt['p99'])} µs, max {_num(rtt['max'])} µs. A tick's cost is "
+                "what its tasks take, timed by the loop; its baseline is what one iteration "
+                "of the bare loop costs the machine (its CPU over its iterations).",
                 ""]
         tasks = t["idle"].get("tasks")
         if tasks:

@@ -156,14 +156,16 @@ def supervised(config: Path, workdir: Path, duration: float, rate: float,
     late, overruns = window(data["samples"], t0, t1)
     cpu = round(100 * (cpu1 - cpu0) / (t1 - t0), 2)
     cost = tick_cost(data)
+    busy = summary(s[1] for s in data.get("busy", []) if t0 <= s[0] <= t1)
+    per_iteration = round(ref["cpu_pct"] / 100 / rate * 1e6, 1)
     out: dict[str, Any] = {
         "late_us": versus(summary(late), ref["late_us"]),
         "overruns": compare(overruns, ref["overruns"]),
         "cpu_pct": compare(cpu, ref["cpu_pct"]),
-        # The tasks' time per tick (in the loop) beside what one iteration of the bare loop
-        # costs the machine (its CPU over its iterations: the wake-up alone).
-        "tick_cost_us": compare(cost["mean_us_per_tick"],
-                                round(ref["cpu_pct"] / 100 / rate * 1e6, 1)),
+        # What a tick takes (its tasks and their bookkeeping, timed by the loop) beside what
+        # one iteration of the bare loop costs the machine (its CPU over its iterations).
+        "tick_busy_us": {k: compare(busy[k], per_iteration) for k in ("p50", "p99", "mean")},
+        "tick_cost_us": compare(cost["mean_us_per_tick"], per_iteration),
         "tasks": cost["tasks"],
         "ticks": len(late),
         "expected_ticks": int(round((t1 - t0) * rate)),

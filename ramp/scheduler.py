@@ -137,6 +137,8 @@ class Scheduler:
         self.on_stall: StallHandler | None = None
         #: Observer hook: (now, lateness in s) as every tick starts. None costs nothing.
         self.on_tick: TickHook | None = None
+        #: Observer hook: (now, s the tick's tasks took, bookkeeping included) as it ends.
+        self.on_tick_done: TickHook | None = None
         self.stalls = 0
         self._beat: float | None = None  # clock time the last tick started
         self._unit = WAIT  # the unit of work in progress (or last begun)
@@ -417,25 +419,33 @@ class Scheduler:
             self.on_tick(now, late)
         missed = int(late // self.period)
         worst_name, worst_s = "", 0.0
+        clock_now, index, t = self.clock.now, self._index, now
         for task in list(self.tasks):
             # Skipped ticks move the index in jumps; a task runs at the first tick at or past
             # its slot (never twice to catch up), then waits for its next slot on the grid.
-            if not task.enabled or self._index < task.next_index:
+            if not task.enabled or index < task.next_index:
                 continue
-            task.next_index = (self._index // task.divisor + 1) * task.divisor
+            task.next_index = (index // task.divisor + 1) * task.divisor
             tdt = task.divisor * self.period if task.last_run is None else now - task.last_run
             task.last_run = now
-            self._begin(task.name)
-            t0 = self.clock.now()
+            # As _begin, with the time the previous task ended (one clock read per task).
+            if self.on_stall is not None and (
+                    self._stall_requested or t - self._beat > self.stall_limit):
+                self.check_stall()
+                t = clock_now()
+            self._unit = self.current_task = task.name
+            self.alive_at = time.perf_counter()
             try:
                 task.fn(now, tdt)
             except Exception:
                 task.errors += 1
                 log.exception("task %s raised; the loop goes on", task.name)
-            spent = self.clock.now() - t0
+            t1 = clock_now()
+            spent, t = t1 - t, t1
             task.runs += 1
             task.total_s += spent
-            task.max_s = max(task.max_s, spent)
+            if spent > task.max_s:
+                task.max_s = spent
             if spent > worst_s:
                 worst_name, worst_s = task.name, spent
         self.current_task = ""
@@ -450,6 +460,8 @@ class Scheduler:
         self._next = deadline + (1 + missed) * self.period
         # Tasks that ran past the next deadline: the overrun is this tick's, name its task.
         after = self.clock.now()
+        if self.on_tick_done is not None:
+            self.on_tick_done(now, after - now)
         if after > self._next:
             self.stats.record_missed(after - self._next)
             extra = int((after - self._next) // self.period) + 1

@@ -108,3 +108,5 @@ def _connect(sup: Supervisor, observer: Observer) -> None:
         sup.bus_manager.on_fault = lambda bus, reason, t: observer.bus_fault(t, bus, reason)
     if overridden(observer, "tick"):
         sup.scheduler.on_tick = observer.tick
+    if overridden(observer, "tick_done"):
+        sup.scheduler.on_tick_done = observer.tick_done

@@ -54,6 +54,7 @@ class BusManager:
         #: Observer hook (the flight recorder): None costs nothing.
         self.on_fault: FaultHook | None = None
         self._ready = {name: False for name in self.buses}
+        self._waiting = True  # some open bus is not ready yet: each tick asks again
         self._watched: dict[str, int] = {}
         for bus in self.buses.values():
             bus.gate = scheduler.on_time  # motion computed before a stall never goes out
@@ -102,7 +103,8 @@ class BusManager:
                 bus.tick(now, dt)
             except DeviceError as exc:
                 self.fault(name, exc, now)
-        self._refresh(now)
+        if self._waiting:
+            self._refresh(now)
 
     def retry(self, now: float, dt: float) -> None:
         """About once a second: reopen what is closed."""
@@ -159,6 +161,10 @@ class BusManager:
             if ready != self._ready[name]:
                 self._ready[name] = ready
                 changed = True
+        # An open bus becomes ready only in its own tick (a board attaches); it stops being
+        # ready only by failing, which refreshes too: with every open bus ready, the ticks
+        # need not ask again.
+        self._waiting = any(b.is_open and not self._ready[n] for n, b in self.buses.items())
         if changed:
             self._on_change(now)
 
@@ -180,6 +186,7 @@ class BusManager:
         health.reason = ""
         log.info("bus %s (%s) open", name, bus.driver_name)
         self._watch(name, bus)
+        self._waiting = True  # is it ready yet? the next refresh says
         return True
 
     def _collect_opens(self, now: float) -> None:

@@ -23,6 +23,7 @@ The points (method, when, and the layer hook it is connected to):
 - `bus_fault(t, bus, reason)`: a bus failed and was closed (its modules fault);
   `BusManager.on_fault`.
 - `tick(t, late_s)`: every tick, with how late it started; `Scheduler.on_tick`.
+- `tick_done(t, busy_s)`: every tick, with how long its tasks took; `Scheduler.on_tick_done`.
 - `started(supervisor)`: serving; add periodic work here (`supervisor.scheduler.add_task`),
   such as health and module rows at 10 Hz from `supervisor.health_rows()` and
   `supervisor.module_rows(name)`.
@@ -43,7 +44,7 @@ if TYPE_CHECKING:
 
 #: The methods `build` connects when a subclass overrides them.
 POINTS = ("message_in", "message_out", "command", "module_state", "watchdog", "control",
-          "stall", "bus_fault", "tick")
+          "stall", "bus_fault", "tick", "tick_done")
 
 
 class Observer:
@@ -81,6 +82,9 @@ class Observer:
 
     def tick(self, t: float, late_s: float) -> None:
         """A tick began `late_s` after its deadline."""
+
+    def tick_done(self, t: float, busy_s: float) -> None:
+        """The tick that began at `t` took `busy_s` (its tasks and their bookkeeping)."""
 
 
 def overridden(observer: Observer, point: str) -> bool:

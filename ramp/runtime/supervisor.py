@@ -14,7 +14,6 @@ from collections.abc import Callable
 from ramp.clock import Clock
 from ramp.config import Config
 from ramp.hal.interfaces import Bus
-from ramp.layers.module_distribution import Module
 from ramp.layers.robot_distribution import (
     Health,
     ModuleRegistry,
@@ -72,7 +71,7 @@ class Supervisor:
         slot = self.slots.get(name)
         if slot is None or slot.state != "ok":
             return []
-        return slot.module._get()
+        return slot.module.rows()
 
     def health(self) -> Health:
         s = self.scheduler.stats
@@ -173,5 +172,3 @@ def _only_attached(slot: ModuleSlot,
             run(now, dt)
     return task
 
-
-__all__ = ["Module", "Supervisor"]

@@ -202,6 +202,11 @@ class Module(ABC):
                 out.append(Response(self.name, p.device, p.name, (value,)))
         return out
 
+    def rows(self) -> list[Response]:
+        """The get rows as values (what a recorder samples); `get_line` is the same on the
+        wire."""
+        return self._get()
+
     def get_line(self, version: Version) -> bytes:
         """The get answer as it goes on the wire (the same rows as `_get`), rebuilt only when
         `version` moved on since the last one (see the module docstring)."""

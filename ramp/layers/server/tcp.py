@@ -282,11 +282,14 @@ class McpServer:
 
         A message of one request (or none) is one step; a longer one is answered a request
         per step across turns (`conn.ctx` holds it meanwhile). Everything is looked up once
-        per turn: this loop runs for every message a client sends."""
+        per turn: this loop runs for every message a client sends. The messages of one turn
+        share its request context: one client, and a time that is at most a turn (2 ms) old.
+        """
         robot = self.robot
         request, message, parse, now = robot.request, robot.message, self._parse, self._now
         queue, out = conn.queue, conn.out
         hook_in, hook_out = self.on_message_in, self.on_message_out
+        turn = RequestContext(conn, t)
         while True:
             ctx = conn.ctx
             if ctx is not None:  # a message of several requests, one per step
@@ -307,7 +310,7 @@ class McpServer:
                 if not queue:
                     return
                 msg = queue.popleft()
-                ctx = RequestContext(conn, t)
+                ctx = turn
                 if hook_in is not None:
                     hook_in(conn, t, msg)
                 message(ctx)
@@ -322,7 +325,7 @@ class McpServer:
                             line = self._fault(conn, exc)
                     elif requests:
                         conn.ctx, conn.requests, conn.index, conn.answer, conn.tail = (
-                            ctx, requests, 0, [], line)
+                            RequestContext(conn, t), requests, 0, [], line)
                         continue
                 out += line
                 out += b"\n"
