@@ -47,6 +47,10 @@ def setup_logging(level: str) -> None:
     handler.setFormatter(JournalFormatter(fmt) if journal else logging.Formatter(fmt))
     logging.basicConfig(level=getattr(logging, level.upper(), logging.INFO),
                         handlers=[handler], force=True)
+    # `transitions` (the watchdog and the attachment machines) logs every transition at INFO;
+    # our own lines already say what happened, so its lines appear only with --log-level debug.
+    if level.lower() != "debug":
+        logging.getLogger("transitions").setLevel(logging.WARNING)
 
 
 def _print_errors(errors: list[ConfigError]) -> None:
