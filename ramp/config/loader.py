@@ -415,6 +415,7 @@ def _server_lines(root: MarkedMap) -> dict[str, int]:
 def _buses(c: _Checker, root: MarkedMap) -> tuple[dict[str, BusConfig], dict[str, type[Bus]]]:
     out: dict[str, BusConfig] = {}
     classes: dict[str, type[Bus]] = {}
+    ports: dict[str, str] = {}
     raw = root.get("buses")
     if raw is None:
         return out, classes
@@ -449,6 +450,14 @@ def _buses(c: _Checker, root: MarkedMap) -> tuple[dict[str, BusConfig], dict[str
                   f"{shorten(repr(sim))} is not true or false")
             sim = True
         params = c.values(entry, path, dict(cls.fields), skip=BUS_COMMON)
+        port = params.get("port")
+        if isinstance(port, str):
+            # A serial port has one owner: two buses on it would interleave their packets.
+            other = ports.setdefault(port, str(name))
+            if other != str(name):
+                c.err(f"{path}.port", entry.lines.get("port", entry.line),
+                      f"{port} is already the port of bus {other}; one bus per serial port "
+                      "(several controllers share a port as addresses of one bus)")
         out[str(name)] = BusConfig(str(name), driver, MappingProxyType(params), sim, line)
         classes[str(name)] = cls
     return out, classes

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from ramp.cli import main
@@ -110,3 +111,16 @@ def test_marte_config_with_a_bad_sabertooth_address() -> None:
     line = next(i for i, t in enumerate(text.splitlines(), 1) if "address: 140" in t)
     assert errors_of(text) == [f"ramp.yaml:{line}: modules.base.lf_wheel.address: 140 is not a "
                                "Sabertooth address (128-135)"]
+
+
+def test_two_buses_on_one_serial_port_are_a_config_error() -> None:
+    from tests.harness import MARTE_YAML
+
+    ports = re.findall(r"\bport: (/dev/[^,}\s]+)", MARTE_YAML)
+    assert len(set(ports)) >= 2, ports
+    text = MARTE_YAML.replace(ports[1], ports[0])
+    line = [i for i, t in enumerate(text.splitlines(), 1) if f"port: {ports[0]}" in t][1]
+    errs = errors_of(text)
+    assert len(errs) == 1, errs
+    assert errs[0].startswith(f"ramp.yaml:{line}: buses.") and ".port: " in errs[0]
+    assert "is already the port of bus" in errs[0]
