@@ -1,0 +1,20 @@
+"""The autonomy's view, live in Foxglove (issue 13 part 4; SPEC 8's channels, streamed).
+
+- `FoxgloveLive` (`foxglove_live.py`): a Foxglove WebSocket server fed like the flight
+  recorder (`add_channel`, `publish`), off the tick; `ramp-autonomy --foxglove-port P`.
+- `tee` (`tee.py`): one producer feeding a recording and the live view at once.
+- `protocol.py`: the `foxglove.websocket.v1` messages, sans I/O.
+
+The server needs the `websockets` library (the `foxglove` extra); importing this package
+does not, so a command can offer the option and say what is missing only when it is used.
+"""
+
+from ramp.autonomy.live.foxglove_live import (
+    DEFAULT_HOST,
+    ClientStats,
+    FoxgloveLive,
+    LiveViewError,
+)
+from ramp.autonomy.live.tee import Tee, tee
+
+__all__ = ["DEFAULT_HOST", "ClientStats", "FoxgloveLive", "LiveViewError", "Tee", "tee"]

@@ -1,0 +1,505 @@
+"""`FoxgloveLive`: the autonomy's channels streamed to Foxglove as they are published.
+
+It has the flight recorder's publishing shape (`ramp.recorder.Recorder`): `add_channel(spec)`
+with a `ChannelSpec` (topic, schema name, JSON Schema), `publish(t, topic, payload)` with
+the clock's seconds and a JSON-able mapping, `start(now)`, `close()`, `timebase.ns(t)`. So
+the code that fills a recording can feed a live view, or both at once (`ramp.autonomy.live.tee`).
+
+Never in the tick's way:
+
+- No subscriber on a topic: `publish` is a dictionary look-up and returns (no encoding).
+- Otherwise it encodes the payload once (JSON) and appends it to a bounded inbox; when the
+  inbox is full (the server thread is starved) the message is dropped and counted.
+- The server runs on its own thread with its own asyncio loop. It fans each message out to
+  the clients subscribed to its channel. Each client has its own queue with at most `depth`
+  messages per channel: a client that reads slowly (a weak Wi-Fi link, a laptop that went to
+  sleep) loses its oldest messages of that channel, counted in `dropped`, and always gets the
+  latest ones; it never slows the tick or the other clients.
+- Clients connect and disconnect at any time; a client that vanishes without closing is
+  found by the WebSocket pings (20 s) and forgotten.
+
+Messages carry the time `timebase.ns(t)`: the clock's seconds mapped once to nanoseconds
+since the Unix epoch, as the recorder maps them, so Foxglove shows real dates.
+
+Channels named in `latched` (a map sent only when it changes, the mission's state) keep
+their last message, and a client that subscribes later gets it at once.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import json
+import logging
+import math
+import threading
+import time
+from collections import deque
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Protocol
+
+from ramp.autonomy.live import protocol
+from ramp.errors import RampError
+
+if TYPE_CHECKING:
+    from websockets.asyncio.server import ServerConnection
+
+log = logging.getLogger("ramp.autonomy.live")
+
+DEFAULT_HOST = "127.0.0.1"
+#: Messages kept per channel for each client that has not taken them yet.
+DEFAULT_DEPTH = 8
+START_TIMEOUT_S = 5.0
+
+_encode = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
+
+
+class LiveViewError(RampError):
+    """The live view cannot serve (the port is taken, the `websockets` library is missing)."""
+
+
+class ChannelLike(Protocol):
+    """What a channel declaration offers (`ramp.recorder.schemas.ChannelSpec` does)."""
+
+    @property
+    def topic(self) -> str: ...
+
+    @property
+    def schema_name(self) -> str: ...
+
+    @property
+    def schema(self) -> Mapping[str, Any]: ...
+
+
+class Stamps(Protocol):
+    """Clock seconds to ns since the Unix epoch (`ramp.recorder.writer.TimeBase` is one)."""
+
+    def ns(self, t: float) -> int: ...
+
+
+class WallTimeBase:
+    """`ns(t) = origin_ns + round((t - t0) * 1e9)`: the clock's time as a real date, running
+    exactly as the clock runs (read the wall clock once, at `start`)."""
+
+    def __init__(self, t0: float, origin_ns: int) -> None:
+        self.t0 = t0
+        self.origin_ns = origin_ns
+
+    def ns(self, t: float) -> int:
+        return max(0, self.origin_ns + round((t - self.t0) * 1e9))
+
+
+@dataclass(frozen=True)
+class ClientStats:
+    """One connection: `name` (host:port), Message Data frames `sent` to it, `dropped` for
+    newer ones while it read slowly, and `queued` for it now (at most `depth` a channel)."""
+
+    name: str
+    sent: int
+    dropped: int
+    queued: int
+
+
+@dataclass(eq=False)
+class _Channel:
+    id: int
+    topic: str
+    schema_name: str
+    schema: Mapping[str, Any]
+    latched: bool
+    #: Clients subscribed, with their subscription id (written only by the server thread;
+    #: `publish` reads whether it is empty).
+    clients: dict[_Client, int] = field(default_factory=dict)
+    last: tuple[int, bytes] | None = None
+
+    def advert(self) -> dict[str, Any]:
+        return protocol.channel_advert(self.id, self.topic, self.schema_name, self.schema)
+
+
+@dataclass(eq=False)
+class _Client:
+    """One connection's state, touched only by the server thread."""
+
+    ws: ServerConnection
+    name: str
+    wake: asyncio.Event
+    subs: dict[int, _Channel] = field(default_factory=dict)          # subscription id ->
+    advertised: set[int] = field(default_factory=set)                # channel ids
+    control: deque[str] = field(default_factory=deque)               # never dropped
+    #: Frames in the order they came, as [channel id, frame]; a dropped one's frame is None.
+    frames: deque[list[Any]] = field(default_factory=deque)
+    per_channel: dict[int, deque[list[Any]]] = field(default_factory=dict)
+    sent: int = 0
+    dropped: int = 0
+
+    def push(self, channel_id: int, frame: bytes, depth: int) -> int:
+        """Queue a frame; returns how many older frames of the channel were dropped."""
+        entry = [channel_id, frame]
+        queue = self.per_channel.get(channel_id)
+        if queue is None:
+            queue = self.per_channel[channel_id] = deque()
+        queue.append(entry)
+        self.frames.append(entry)
+        dropped = 0
+        while len(queue) > depth:
+            queue.popleft()[1] = None
+            dropped += 1
+        self.dropped += dropped
+        self.wake.set()
+        return dropped
+
+    def forget(self, channel_id: int) -> None:
+        """Drop what is queued on a channel (unsubscribed: nothing more of it is sent)."""
+        for entry in self.per_channel.pop(channel_id, ()):
+            entry[1] = None
+
+    def say(self, text: str) -> None:
+        self.control.append(text)
+        self.wake.set()
+
+    def advertise(self, channels: Iterable[_Channel]) -> None:
+        """Tell the client about the channels it has not heard of yet."""
+        new = [ch for ch in channels if ch.id not in self.advertised]
+        if new:
+            self.advertised.update(ch.id for ch in new)
+            self.say(protocol.advertise(ch.advert() for ch in new))
+
+
+class FoxgloveLive:
+    """A Foxglove WebSocket server fed like the flight recorder; see the module docstring.
+
+    `host`/`port`: where to listen (`port=0` picks a free port; `start` returns it).
+    `name`: shown by Foxglove. `origin_ns`: the wall clock at `start` (default: read then).
+    `latched`: topics whose last message a new subscriber gets at once. `depth`: messages
+    kept per channel for a client that reads slowly. `inbox`/`inbox_bytes`: what may wait for
+    the server thread before messages are dropped.
+    """
+
+    def __init__(self, *, host: str = DEFAULT_HOST, port: int = 0, name: str = "ramp",
+                 origin_ns: int | None = None, latched: Iterable[str] = (),
+                 depth: int = DEFAULT_DEPTH, inbox: int = 1024,
+                 inbox_bytes: int = 8 << 20) -> None:
+        if depth < 1:
+            raise ValueError("depth must be at least 1")
+        self.host = host
+        self.port = port
+        self.name = name
+        self.depth = depth
+        self.inbox_limit = inbox
+        self.inbox_bytes = inbox_bytes
+        self._origin_ns = origin_ns
+        self._latched = frozenset(latched)
+        self._channels: dict[str, _Channel] = {}
+        self._ids = itertools.count(1)
+        self._lock = threading.Lock()  # the channel table and the inbox
+        self._inbox: deque[tuple[_Channel, int, bytes]] = deque()
+        self._inbox_size = 0
+        self._dropped_inbox = 0
+        self._dropped_gone = 0  # by clients that have left
+        self._sent_gone = 0
+        self._bad_topics: set[str] = set()
+        self._clients: set[_Client] = set()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stop: asyncio.Event | None = None
+        self._thread: threading.Thread | None = None
+        self._ready = threading.Event()
+        self._start_error: BaseException | None = None
+        self._session = ""
+        self.timebase: Stamps | None = None
+
+    # -- lifecycle ----------------------------------------------------------------------------
+    def start(self, now: float) -> int:
+        """Listen; returns the bound port. Raises LiveViewError when it cannot.
+
+        `now`: the clock's time, the origin of the message times (unless `timebase` was set
+        before, to share a recorder's)."""
+        if self._thread is not None:
+            return self.port
+        try:
+            from websockets.asyncio.server import serve  # noqa: F401 - the optional extra
+        except ImportError as exc:
+            raise LiveViewError("the Foxglove live view needs the `websockets` library: "
+                                "pip install 'ramp[foxglove]'") from exc
+        origin = self._origin_ns if self._origin_ns is not None else time.time_ns()
+        if self.timebase is None:
+            self.timebase = WallTimeBase(now, origin)
+        self._session = str(origin)
+        # The WebSocket server is an I/O edge: it waits on sockets for clients that come and
+        # go at their own pace, so it runs on its own thread and asyncio loop, never on the
+        # tick's. The tick only hands it encoded messages through the bounded inbox.
+        self._thread = threading.Thread(target=self._run, name="foxglove-live", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(START_TIMEOUT_S):
+            raise LiveViewError(f"foxglove: the server did not start within "
+                                f"{START_TIMEOUT_S:g} s")
+        if self._start_error is not None:
+            err, self._start_error = self._start_error, None
+            self._thread.join(1.0)
+            self._thread = None  # nothing is serving: `start` may be tried again
+            self._ready.clear()
+            reason = err.strerror if isinstance(err, OSError) and err.strerror else err
+            raise LiveViewError(f"foxglove: cannot listen on {self.host}:{self.port}: "
+                                f"{reason}") from err
+        log.info("foxglove: serving the live view on %s", self.url)
+        return self.port
+
+    def close(self, timeout: float = 3.0) -> None:
+        """Close every connection and stop the server thread. Idempotent."""
+        loop, stop, thread = self._loop, self._stop, self._thread
+        if loop is not None and stop is not None:
+            with contextlib.suppress(RuntimeError):  # the loop has already ended
+                loop.call_soon_threadsafe(stop.set)
+        if thread is not None:
+            thread.join(timeout)
+
+    def __enter__(self) -> FoxgloveLive:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def url(self) -> str:
+        """Where Foxglove connects: `ws://HOST:PORT`."""
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"ws://{host}:{self.port}"
+
+    # -- figures ------------------------------------------------------------------------------
+    @property
+    def clients(self) -> int:
+        """Connections open now."""
+        return len(self._clients)
+
+    @property
+    def subscriptions(self) -> int:
+        """Subscriptions open now, over every client."""
+        return sum(len(ch.clients) for ch in list(self._channels.values()))
+
+    @property
+    def dropped(self) -> int:
+        """Messages lost: the inbox was full, or a slow client was sent only the latest."""
+        return (self._dropped_inbox + self._dropped_gone
+                + sum(c.dropped for c in list(self._clients)))
+
+    def client_stats(self) -> list[ClientStats]:
+        """Each connection's figures, as of now."""
+        return [ClientStats(c.name, c.sent, c.dropped,
+                            sum(len(q) for q in list(c.per_channel.values())))
+                for c in list(self._clients)]
+
+    @property
+    def sent(self) -> int:
+        """Message Data frames handed to the clients' connections."""
+        return self._sent_gone + sum(c.sent for c in list(self._clients))
+
+    # -- the producer's calls -----------------------------------------------------------------
+    def add_channel(self, spec: ChannelLike) -> None:
+        """Declare a channel before `publish`ing on it; clients connected now are told."""
+        with self._lock:
+            known = self._channels.get(spec.topic)
+            if known is not None:
+                if (known.schema_name, known.schema) != (spec.schema_name, spec.schema):
+                    raise ValueError(f"foxglove: topic {spec.topic} is already declared "
+                                     "otherwise")
+                return
+            channel = _Channel(next(self._ids), spec.topic, spec.schema_name,
+                               dict(spec.schema), spec.topic in self._latched)
+            # A new dict rather than an insertion: `publish` on another thread may be reading.
+            self._channels = {**self._channels, spec.topic: channel}
+        self._call(self._advertise, channel)
+
+    def publish(self, t: float, topic: str, payload: Mapping[str, Any]) -> None:
+        """Stream a payload on a declared channel to its subscribers (cheap; never waits)."""
+        channel = self._channels.get(topic)
+        if channel is None:
+            raise KeyError(f"foxglove: no channel {topic}; declare it with add_channel")
+        if not channel.clients and not channel.latched:
+            return
+        timebase, loop = self.timebase, self._loop
+        if timebase is None or loop is None:
+            return  # not serving
+        try:
+            data = _payload(payload)
+        except (TypeError, ValueError) as exc:
+            # A payload JSON cannot carry is the producer's bug; it must not stop the tick
+            # only because someone is watching. Counted, and said once per topic.
+            with self._lock:
+                self._dropped_inbox += 1
+            if topic not in self._bad_topics:
+                self._bad_topics.add(topic)
+                log.warning("foxglove: %s: cannot encode the message as JSON (%s); "
+                            "dropping such messages", topic, exc)
+            return
+        with self._lock:
+            if (len(self._inbox) >= self.inbox_limit
+                    or self._inbox_size + len(data) > self.inbox_bytes):
+                self._dropped_inbox += 1
+                return
+            wake = not self._inbox
+            self._inbox.append((channel, timebase.ns(t), data))
+            self._inbox_size += len(data)
+        if wake:
+            with contextlib.suppress(RuntimeError):  # closing: the message goes nowhere
+                loop.call_soon_threadsafe(self._fan_out)
+
+    # -- the server thread --------------------------------------------------------------------
+    def _call(self, fn: Any, *args: Any) -> None:
+        loop = self._loop
+        if loop is not None:
+            with contextlib.suppress(RuntimeError):
+                loop.call_soon_threadsafe(fn, *args)
+
+    def _run(self) -> None:
+        loop = asyncio.new_event_loop()
+        try:
+            loop.run_until_complete(self._serve())
+        except BaseException as exc:  # noqa: BLE001 - reported by start, never lost
+            self._start_error = self._start_error or exc
+            log.exception("foxglove: the live view's server stopped")
+        finally:
+            self._loop = None
+            self._ready.set()
+            loop.close()
+
+    async def _serve(self) -> None:
+        from websockets.asyncio.server import serve
+        from websockets.typing import Subprotocol
+
+        self._stop = asyncio.Event()
+        try:
+            server = await serve(self._connection, self.host, self.port,
+                                 subprotocols=[Subprotocol(protocol.SUBPROTOCOL)],
+                                 compression=None, max_size=1 << 20, close_timeout=1.0)
+        except OSError as exc:
+            self._start_error = exc
+            self._ready.set()
+            return
+        self.port = server.sockets[0].getsockname()[1]
+        self._loop = asyncio.get_running_loop()
+        self._ready.set()
+        try:
+            await self._stop.wait()
+        finally:
+            self._loop = None
+            server.close()
+            await server.wait_closed()
+
+    async def _connection(self, ws: ServerConnection) -> None:
+        peer = ws.remote_address
+        name = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer)
+        client = _Client(ws, name, asyncio.Event())
+        client.say(protocol.server_info(self.name, self._session))
+        client.advertise(list(self._channels.values()))
+        self._clients.add(client)
+        log.info("foxglove: %s connected", name)
+        sender = asyncio.create_task(self._send(client))
+        try:
+            async for message in ws:
+                if isinstance(message, str):
+                    self._request(client, message)
+                else:
+                    client.say(protocol.status(protocol.STATUS_ERROR,
+                                               "binary client messages are not supported"))
+        except Exception as exc:  # noqa: BLE001 - one client's trouble ends that client only
+            log.debug("foxglove: %s: %s", name, exc)
+        finally:
+            self._clients.discard(client)
+            for channel in set(client.subs.values()):
+                channel.clients.pop(client, None)
+            self._dropped_gone += client.dropped
+            self._sent_gone += client.sent
+            sender.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await sender
+            log.info("foxglove: %s left (%d messages sent, %d dropped)", name, client.sent,
+                     client.dropped)
+
+    def _request(self, client: _Client, text: str) -> None:
+        try:
+            request = protocol.parse_client_text(text)
+        except protocol.ClientRequestError as exc:
+            client.say(protocol.status(protocol.STATUS_ERROR, str(exc)))
+            return
+        by_id = {ch.id: ch for ch in list(self._channels.values())}
+        if isinstance(request, protocol.Subscribe):
+            for sub_id, channel_id in request.subscriptions:
+                channel = by_id.get(channel_id)
+                if channel is None:
+                    client.say(protocol.status(protocol.STATUS_WARNING,
+                                               f"subscribe: no channel {channel_id}"))
+                elif sub_id in client.subs:
+                    client.say(protocol.status(protocol.STATUS_ERROR,
+                                               f"subscribe: subscription id {sub_id} is "
+                                               "already in use"))
+                elif client in channel.clients:
+                    client.say(protocol.status(protocol.STATUS_WARNING,
+                                               f"subscribe: already subscribed to "
+                                               f"{channel.topic}"))
+                else:
+                    client.subs[sub_id] = channel
+                    channel.clients[client] = sub_id
+                    if channel.last is not None:
+                        stamp, data = channel.last
+                        client.push(channel.id, protocol.message_data(sub_id, stamp, data),
+                                    self.depth)
+            return
+        for sub_id in request.subscription_ids:
+            channel = client.subs.pop(sub_id, None)
+            if channel is not None:
+                channel.clients.pop(client, None)
+                client.forget(channel.id)
+
+    def _advertise(self, channel: _Channel) -> None:
+        for client in self._clients:
+            client.advertise([channel])
+
+    def _fan_out(self) -> None:
+        with self._lock:
+            batch = list(self._inbox)
+            self._inbox.clear()
+            self._inbox_size = 0
+        for channel, stamp, data in batch:
+            if channel.latched:
+                channel.last = (stamp, data)
+            for client, sub_id in channel.clients.items():
+                if client.push(channel.id, protocol.message_data(sub_id, stamp, data),
+                               self.depth) and client.dropped == 1:
+                    log.warning("foxglove: %s is not keeping up; it gets the latest "
+                                "messages and loses older ones (counted)", client.name)
+
+    async def _send(self, client: _Client) -> None:
+        """Send a client's queue in order, as fast as its connection takes it."""
+        ws = client.ws
+        while True:
+            while client.control or client.frames:
+                if client.control:
+                    await ws.send(client.control.popleft())
+                    continue
+                channel_id, frame = client.frames.popleft()
+                if frame is None:
+                    continue  # dropped for a newer one, or unsubscribed
+                client.per_channel[channel_id].popleft()
+                client.sent += 1
+                await ws.send(frame)
+            client.wake.clear()
+            await client.wake.wait()
+
+
+def _payload(obj: Mapping[str, Any]) -> bytes:
+    """JSON bytes; a NaN or infinity (which JSON cannot carry) is sent as null."""
+    try:
+        return _encode(obj).encode()
+    except ValueError:
+        return _encode(_finite(obj)).encode()
+
+
+def _finite(obj: Any) -> Any:
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_finite(v) for v in obj]
+    return obj
