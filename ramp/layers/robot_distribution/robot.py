@@ -49,6 +49,8 @@ class Health:
     late_us: tuple[float, float, float]
     overruns: int
     clients: int
+    #: Records the flight recorder has lost (a slow or full disk); None when not recording.
+    recorder_dropped: int | None = None
 
 
 class TickCount(Protocol):
@@ -104,6 +106,8 @@ class RobotRequests(Module):
                                 (prop, kind, unit) if unit else (prop, kind)))
         out.extend(Response("robot", name, "property", ("state", "name"))
                    for name in self.layer.slots)
+        if self.layer.recording():
+            out.append(Response("robot", "recorder", "property", ("dropped", "int")))
         out.extend(Response("robot", fn.device, "kind", (fn.name, fn.kind))
                    for fn in self.functions.values())
         return out
@@ -303,4 +307,10 @@ class RobotDistribution:
         ]
         rows.extend(Response("robot", name, "state", (slot.state,))
                     for name, slot in self.slots.items())
+        if h.recorder_dropped is not None:
+            rows.append(Response("robot", "recorder", "dropped", (h.recorder_dropped,)))
         return rows
+
+    def recording(self) -> bool:
+        """A flight recorder is on (`robot.get` then has `robot:recorder.dropped=(n)`)."""
+        return self._health().recorder_dropped is not None
