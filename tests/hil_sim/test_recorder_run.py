@@ -265,18 +265,18 @@ def test_the_summary_tells_what_happened(run: dict[str, Any],
 @pytest.mark.timeout(60)
 def test_a_sigkilled_run_leaves_a_readable_file_short_of_at_most_a_second(
         tmp_path: Path) -> None:
-    with running(["--sim", "--record", str(tmp_path / "rec")], tmp_path) as (proc, port):
-        with connect(port) as s:
-            assert ask(s, "base:base.drive=(50,0)") == ""
-            end = time.monotonic() + 2.5
-            n = 0
-            while time.monotonic() < end:
-                assert ask(s, f"base:lf_wheel.vel=({n % 100})") == ""
-                n += 1
-                time.sleep(0.02)
-            killed_at = time.monotonic()  # CLOCK_MONOTONIC: the supervisor's clock too
-            os.kill(proc.pid, signal.SIGKILL)
-            proc.wait(10)
+    with running(["--sim", "--record", str(tmp_path / "rec")], tmp_path) as (proc, port), \
+            connect(port) as s:
+        assert ask(s, "base:base.drive=(50,0)") == ""
+        end = time.monotonic() + 2.5
+        n = 0
+        while time.monotonic() < end:
+            assert ask(s, f"base:lf_wheel.vel=({n % 100})") == ""
+            n += 1
+            time.sleep(0.02)
+        killed_at = time.monotonic()  # CLOCK_MONOTONIC: the supervisor's clock too
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(10)
     assert proc.returncode == -signal.SIGKILL
     (_, path), = recording_files(tmp_path / "rec")
     meta: dict[str, str] = {}
