@@ -113,7 +113,9 @@ class RobotRequests(Module):
         return out
 
     def stop(self) -> None:
-        self.layer.stop_all("robot.stop")
+        # The watchdog is disarmed by the request path (a stop that leaves nothing moving),
+        # with the message's time: an observer sees the change when it happened.
+        self.layer.stop_modules("robot.stop")
 
     def is_moving(self) -> bool:
         return False
@@ -276,6 +278,10 @@ class RobotDistribution:
             log.warning("watchdog tripped: commanding client %s disconnected; stopping every"
                         " module", client.peer)
             self._stop_keep_trip("commanding client lost")
+
+    def stop_modules(self, reason: str) -> None:
+        """Every attached module stops; the watchdog state is left to the caller."""
+        self._stop_keep_trip(reason)
 
     def _stop_keep_trip(self, reason: str) -> None:
         """Every attached module stops; the watchdog state is left to the caller."""
