@@ -10,7 +10,8 @@ drop of an episode logs one warning.
 Times are the supervisor's clock in seconds (the `now` its tasks receive); see
 `writer.TimeBase` for how they become MCAP log times.
 
-Use::
+The supervisor does all of this itself when given a recorder (`ramp run --record DIR`,
+`ramp.runtime.build(..., recorder=rec)`: see `ramp.runtime.recording`). By hand::
 
     rec = Recorder(RecorderConfig("/var/lib/ramp/rec"))
     rec.start(clock.now())

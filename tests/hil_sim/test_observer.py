@@ -1,4 +1,4 @@
-"""The runtime's observer points (README, "Observer points"): what the flight recorder will be
+"""The runtime's observer points (README, "Observer points"): what the flight recorder is
 wired to. Each point is seen with the supervisor's time; a point nobody observes keeps its
 hook at None."""
 
