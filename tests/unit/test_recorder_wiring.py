@@ -213,6 +213,8 @@ def test_the_recorder_and_another_observer_both_see_a_run(tmp_path: Path) -> Non
         c = h.connect()
         assert c.ask("demo:motor.vel=(40)") == ""
         h.advance(0.3)
+        h.world.unplugged.add("io2")  # the arm's bus goes away
+        h.advance(0.1)
     finally:
         h.close()
     assert ("demo.motor", 0.4) in other.commands
@@ -221,6 +223,12 @@ def test_the_recorder_and_another_observer_both_see_a_run(tmp_path: Path) -> Non
     msgs = list(Recording(sorted((tmp_path / "rec").glob("*.mcap"))))
     assert any(m.topic == "/robot/commands" and m.data["duty"] == 0.4 for m in msgs)
     assert sum(m.topic == "/demo/get" for m in msgs) >= 3  # 10 Hz over 0.3 s
+    states = [(m.data["module"], m.data["state"]) for m in msgs
+              if m.topic == "/robot/module_state"]
+    assert states == [("demo", "ok"), ("arm", "ok"), ("arm", "fault")]
+    events = [(m.data["kind"], m.data["text"]) for m in msgs if m.topic == "/robot/events"]
+    assert ("fault", "bus io2: simulated device unplugged") in events
+    assert ("watchdog", "armed: motion") in events
 
 
 def test_recording_off_connects_no_hook_and_never_loads_the_mcap_writer() -> None:
