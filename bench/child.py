@@ -1,9 +1,11 @@
 """Processes the benchmarks start: `python -m bench.child NAME ...`.
 
 - `supervisor`: exactly `ramp run --sim` (it calls `ramp.cli.main`; `--real` leaves out
-  `--sim`) with an observer (`ramp.runtime.Observer`) that keeps every tick's lateness with
-  its time and, at shutdown, each driver's `stats` and each task's cost; all of it is written
-  to `--dump` as JSON when the process exits (after SIGTERM).
+  `--sim`, `--record DIR` records) with an observer (`ramp.runtime.Observer`) that keeps every
+  tick's lateness with its time and, at shutdown, each driver's `stats` and each task's cost;
+  all of it is written to `--dump` as JSON when the process exits (after SIGTERM).
+  `--slow-disk BPS` gives the recorder a disk whose writes take BPS bytes a second
+  (`bench.recorder.SlowFile`) and a queue of `--queue-records` records.
 - `select-loop`: the tick baseline, a bare absolute-deadline loop waiting in `select.select`,
   run beside the supervisor until told to stop.
 - `bare-server`: the round-trip baseline, a minimal `select.select` server answering every
@@ -25,6 +27,7 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 
 # -- supervisor ---------------------------------------------------------------------------------
@@ -66,10 +69,34 @@ def supervisor(args: argparse.Namespace) -> int:
             "--log-level", args.log_level]
     if not args.real:
         argv.append("--sim")
+    if args.record:
+        argv += ["--record", args.record]
+    if args.slow_disk:
+        _slow_disk(args.slow_disk, args.queue_records)
     code = ramp.cli.main(argv, observer=BenchObserver())
     Path(args.dump).write_text(json.dumps({"exit": code, "samples": samples, "busy": busy,
                                            **at_exit}))
     return code
+
+
+def _slow_disk(bytes_per_s: float, queue_records: int) -> None:
+    """The recorder `ramp run` builds (`ramp.runtime.recording.recorder_for`, looked up when
+    `ramp run` starts) gets a throttled disk and a short queue, so it falls behind within the
+    run; everything else is `ramp run --record` as it is."""
+    import ramp.runtime.recording as recording
+    from bench.recorder import SlowFile
+    from ramp.recorder import Recorder
+
+    made = recording.recorder_for
+
+    def recorder_for(*args: Any, **kwargs: Any) -> Recorder | None:
+        rec = made(*args, **kwargs)
+        if rec is None:
+            return None
+        return Recorder(rec.config, queue_records=queue_records,
+                        opener=lambda path: SlowFile(path, bytes_per_s))  # type: ignore[arg-type,return-value]
+
+    recording.recorder_for = recorder_for  # type: ignore[assignment]
 
 
 # -- select loop (tick baseline) ----------------------------------------------------------------
@@ -284,6 +311,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--dump", required=True)
     p.add_argument("--log-level", default="warning")
     p.add_argument("--real", action="store_true", help="real drivers: no --sim")
+    p.add_argument("--record", default="", help="ramp run --record DIR")
+    p.add_argument("--slow-disk", type=float, default=0.0,
+                   help="the recorder's disk takes this many bytes a second")
+    p.add_argument("--queue-records", type=int, default=20_000,
+                   help="with --slow-disk: the recorder's queue, in records")
     p.set_defaults(func=supervisor)
     p = sub.add_parser("select-loop")
     p.add_argument("--rate", type=float, required=True)

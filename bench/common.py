@@ -269,15 +269,16 @@ atexit.register(kill_all)
 
 def start_supervisor(name: str, config: Path, workdir: Path, timeout: float = 30.0,
                      cpu: int | None = None, real: bool = False,
-                     env: dict[str, str] | None = None) -> tuple[Child, int, Path]:
+                     env: dict[str, str] | None = None,
+                     extra: Sequence[str] = ()) -> tuple[Child, int, Path]:
     """The supervisor as `ramp run --sim` (`real`: without `--sim`), watched by the bench's
-    observer (bench.child).
+    observer (bench.child); `extra`: more options of `bench.child supervisor` (`--record`).
 
     Returns the child, its MCP port and the file it writes its tick samples, task costs and
     driver statistics to when it exits."""
     dump = workdir / f"{name}-{len(_CHILDREN)}.json"
     child = Child(name, [PYTHON, "-m", "bench.child", "supervisor", "--config", str(config),
-                         "--dump", str(dump), *(["--real"] if real else [])], workdir,
+                         "--dump", str(dump), *(["--real"] if real else []), *extra], workdir,
                   cpu=cpu, env=env)
     try:
         m = child.expect(r"ramp: ready on ([\d.]+):(\d+)", timeout)

@@ -19,6 +19,15 @@
    p50/p99/p99.9/max, overruns, CPU % of a core (all threads), records written and dropped.
    Both recording runs use a queue of `QUEUE_RECORDS` records (the default is 20,000), so
    the slow disk fills it within the run.
+3. **`ramp run --sim` with and without `--record`**: three real supervisor processes
+   (`bench.child supervisor`, the bench's observer keeping every tick's lateness and cost)
+   run *at the same time* on the MARTE config while `SUP_CLIENTS` MCP clients per process
+   drive and poll it at `SUP_HZ` (`base:base.drive=(60,0)base:base.get=()ble:ble.get=()`:
+   a message in and out, four wheel commands, and the 10 Hz health and get samples, about
+   1,200 records/s): `off` (the baseline), `on` (`--record DIR`), and `slow disk`
+   (`--record DIR` on a disk throttled to `SLOW_DISK_BPS`, queue `QUEUE_RECORDS`). Tick
+   lateness, what each tick's work costs (timed by the loop), CPU % of a core (every
+   thread), and `robot:recorder.dropped` as `robot.get` reports it at the end.
 """
 
 from __future__ import annotations
@@ -27,20 +36,37 @@ import argparse
 import io
 import json
 import logging
+import re
 import statistics
 import sys
+import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import IO, Any
 
-from bench.common import PYTHON, Child, Settings, compare, progress, summary, versus
+from bench.common import (
+    PYTHON,
+    Child,
+    Settings,
+    compare,
+    connect,
+    progress,
+    start_supervisor,
+    summary,
+    versus,
+    write_config,
+)
 
 RATE_HZ = 100.0
 SLOW_DISK_BPS = 4_000     # bytes/s: an SD card stalling on erase cycles, or worse
 QUEUE_RECORDS = 2_000     # 1.4 s of this traffic
-#: (tick run seconds, encode calls per kind) by profile
-PROFILE = {"full": (30.0, 20_000), "quick": (4.0, 4_000), "smoke": (0.6, 200)}
+#: (tick run seconds, encode calls per kind, ramp run seconds) by profile
+PROFILE = {"full": (30.0, 20_000, 30.0), "quick": (4.0, 4_000, 4.0),
+           "smoke": (0.6, 200, 0.6)}
+SUP_CLIENTS = 4
+SUP_HZ = 50.0
+SUP_MESSAGE = b"base:base.drive=(60,0)base:base.get=()ble:ble.get=()\n"
 BATCH = 100
 
 
@@ -267,12 +293,98 @@ def tick_runs(workdir: Path, duration: float) -> dict[str, Any]:
     return out
 
 
+# -- 3. ramp run --sim, recording or not --------------------------------------------------------
+def _dropped(port: int) -> int | None:
+    """`robot:recorder.dropped=(n)` from robot.get (None: not recording)."""
+    from bench.common import ask
+
+    with connect(port) as sock:
+        line = ask(sock, "robot:robot.get=()").decode()
+    m = re.search(r"robot:recorder\.dropped=\((\d+)\)", line)
+    return int(m.group(1)) if m else None
+
+
+def supervisor_runs(workdir: Path, duration: float) -> dict[str, Any]:
+    """Three `ramp run --sim` processes at once, each under the same MCP load."""
+    from bench.tick import poll, tick_cost, window
+    from ramp.recorder.reading import Recording
+    from ramp.recorder.writer import recording_files
+
+    config = write_config(workdir, "recorder-sup")
+    modes = {"off": [], "on": ["--record", str(workdir / "sup-on")],
+             "slow": ["--record", str(workdir / "sup-slow"), "--slow-disk", str(SLOW_DISK_BPS),
+                      "--queue-records", str(QUEUE_RECORDS)]}
+    started: dict[str, tuple[Child, int, Path]] = {}
+    rtts: dict[str, list[float]] = {}
+    try:
+        for mode, extra in modes.items():
+            started[mode] = start_supervisor(f"recorder-sup-{mode}", config, workdir,
+                                             extra=extra)
+        t0 = time.monotonic()
+        cpu0 = {m: c.cpu_seconds() for m, (c, _, _) in started.items()}
+        threads = [threading.Thread(target=lambda m=m, port=port: rtts.__setitem__(
+            m, poll(port, SUP_CLIENTS, SUP_HZ, duration, SUP_MESSAGE)))
+            for m, (_, port, _) in started.items()]
+        for th in threads:
+            th.start()
+        for th in threads:
+            th.join(duration + 60)
+        t1 = time.monotonic()
+        cpu1 = {m: c.cpu_seconds() for m, (c, _, _) in started.items()}
+        dropped = {m: _dropped(port) for m, (_, port, _) in started.items()}
+        for child, _, _ in started.values():
+            child.terminate(20)
+    finally:
+        for child, _, _ in started.values():
+            child.kill()
+    runs: dict[str, dict[str, Any]] = {}
+    for mode, (_, _, dump) in started.items():
+        data = json.loads(dump.read_text())
+        late, overruns = window(data["samples"], t0, t1)
+        busy = summary(s[1] for s in data.get("busy", []) if t0 <= s[0] <= t1)
+        runs[mode] = {"late_us": summary(late), "overruns": overruns,
+                      "cpu_pct": round(100 * (cpu1[mode] - cpu0[mode]) / (t1 - t0), 2),
+                      "busy_us": busy, "cost": tick_cost(data), "dropped": dropped[mode],
+                      "rtt_us": summary(rtts.get(mode, []))}
+    off = runs["off"]
+    out: dict[str, Any] = {"duration_s": round(t1 - t0, 2), "clients": SUP_CLIENTS,
+                           "hz_each": SUP_HZ, "message": SUP_MESSAGE.decode().strip(),
+                           "slow_disk_bytes_per_s": SLOW_DISK_BPS,
+                           "slow_queue_records": QUEUE_RECORDS,
+                           "off": {"late_us": off["late_us"], "ticks": off["late_us"]["n"],
+                                   "dropped": off["dropped"]}}
+    for label, mode in (("on", "on"), ("slow_disk", "slow")):
+        r = runs[mode]
+        files = [p for _, p in recording_files(workdir / f"sup-{mode}")]
+        messages = sum(1 for _ in Recording(files, progress=False)) if files else 0
+        out[label] = {
+            "late_us": versus(r["late_us"], off["late_us"]),
+            "overruns": compare(r["overruns"], off["overruns"]),
+            "cpu_pct": compare(r["cpu_pct"], off["cpu_pct"]),
+            "tick_busy_us": {k: compare(r["busy_us"][k], off["busy_us"][k])
+                             for k in ("p50", "p99", "mean")},
+            "recorder_task_us": r["cost"]["tasks"].get("recorder"),
+            "rtt_us_p50": compare(r["rtt_us"]["p50"], off["rtt_us"]["p50"]),
+            "ticks": r["late_us"]["n"],
+            "dropped": r["dropped"],
+            "messages_in_files": messages,
+            "file_bytes": sum(p.stat().st_size for p in files),
+        }
+    on = out["on"]
+    on["records_per_s"] = round(on["messages_in_files"] / out["duration_s"])
+    on["bytes_per_record"] = round(on["file_bytes"] / max(1, on["messages_in_files"]), 1)
+    return out
+
+
 def run(settings: Settings, workdir: Path) -> dict[str, Any]:
-    duration, calls = PROFILE[settings.profile]
+    duration, calls, sup_duration = PROFILE[settings.profile]
     progress(f"recorder: encoding cost, {calls} calls per kind")
     result: dict[str, Any] = {"encode": encode_costs(workdir, calls)}
     progress(f"recorder: tick with the recorder off / on / on a slow disk, {duration:g} s")
     result["tick"] = tick_runs(workdir, duration)
+    progress(f"recorder: ramp run --sim without / with --record / on a slow disk, "
+             f"{SUP_CLIENTS} clients each at {SUP_HZ:g} Hz, {sup_duration:g} s")
+    result["ramp_run"] = supervisor_runs(workdir, sup_duration)
     return result
 
 

@@ -212,6 +212,28 @@ def render(doc: dict[str, Any]) -> str:
                 f"{sd['written']:,} taken by the writer, the queue ({t['queue_records']:,} "
                 f"records) full at the end; recorder on: {t['on']['dropped']} dropped, "
                 f"{t['on']['bytes_per_record']} bytes per record on disk.", ""]
+        rr = rc.get("ramp_run")
+        if rr:
+            on, sd = rr["on"], rr["slow_disk"]
+            out += [f"`ramp run --sim` for {rr['duration_s']:g} s, {rr['clients']} clients "
+                    f"each sending `{rr['message']}` at {rr['hz_each']:g} Hz; three "
+                    "processes at the same time, baseline: the one without `--record`.", "",
+                    HEAD]
+            for label, r in (("--record", on),
+                             (f"--record, slow disk ({rr['slow_disk_bytes_per_s']:,} B/s)",
+                              sd)):
+                out += _pcts(f"{label}: lateness", r["late_us"], " µs", ("p50", "p99", "max"))
+                out += _pcts(f"{label}: tick's work", r["tick_busy_us"], " µs",
+                             ("p50", "mean"))
+                out += [_row(f"{label}: overruns", r["overruns"]),
+                        _row(f"{label}: CPU % of a core", r["cpu_pct"]),
+                        _row(f"{label}: round trip p50", r["rtt_us_p50"], " µs")]
+            task = on.get("recorder_task_us") or {}
+            out += ["", f"Recording: {on['records_per_s']:,} records/s, {on['dropped']} "
+                    f"dropped, {on['bytes_per_record']} bytes per record on disk; the 10 Hz "
+                    f"sampling task {_num(task.get('mean_us'))} µs per run. Slow disk: "
+                    f"{sd['dropped']:,} records dropped and counted (robot.get's "
+                    f"recorder.dropped), {sd['messages_in_files']:,} reached the file.", ""]
     pl = doc.get("planner")
     if pl and "error" not in pl:
         g = pl["grid"]

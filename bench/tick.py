@@ -76,9 +76,10 @@ class BaselineLoop:
         }
 
 
-def poll(port: int, clients: int, hz: float, duration: float) -> list[float]:
-    """`clients` connections each sending POLL_MESSAGE at `hz` on absolute deadlines,
-    staggered evenly; returns every response's round trip in µs."""
+def poll(port: int, clients: int, hz: float, duration: float,
+         message: bytes = POLL_MESSAGE) -> list[float]:
+    """`clients` connections each sending `message` (POLL_MESSAGE) at `hz` on absolute
+    deadlines, staggered evenly; returns every response's round trip in µs."""
     socks = [connect(port) for _ in range(clients)]
     period = 1.0 / hz
     rtt_us: list[float] = []
@@ -95,7 +96,7 @@ def poll(port: int, clients: int, hz: float, duration: float) -> list[float]:
             for i, sock in enumerate(socks):
                 if now >= due[i]:
                     sent[i].append(time.monotonic())
-                    sock.sendall(POLL_MESSAGE)
+                    sock.sendall(message)
                     while due[i] <= now:
                         due[i] += period
             timeout = max(0.0, min(min(due), end) - time.monotonic())

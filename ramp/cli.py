@@ -99,19 +99,22 @@ def cmd_run(args: argparse.Namespace) -> int:
                                    line=config.lines.get("server.max_clients", 0))])
         return EXIT_CONFIG
     return run_supervisor(config, sim=args.sim, host=args.host, port=args.port,
-                          observer=getattr(args, "observer", None))
+                          observer=getattr(args, "observer", None), record=args.record)
 
 
 def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | None,
-                   observer: Observer | None = None) -> int:
+                   observer: Observer | None = None, record: str | None = None) -> int:
     """Build, start and run until a stop signal; motors are stopped before returning.
-    `observer` (see `ramp.runtime.observers`) watches the running supervisor."""
+    `observer` (see `ramp.runtime.observers`) watches the running supervisor; `record`
+    (`--record DIR`) records the run there, over the config's `recorder: dir`."""
     from ramp.clock import MonotonicClock
     from ramp.runtime import build
+    from ramp.runtime.recording import recorder_for
     from ramp.runtime.systemd import SystemdNotifier
 
     clock = MonotonicClock()
     backplane = None
+    recorder = recorder_for(config, record, sim)
     try:  # building drivers and modules checks what the config check cannot see
         if sim:
             from ramp.simulation.backplane import (  # the one place ramp/ reaches firmware_like/
@@ -121,10 +124,11 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
 
             backplane = SimBackplane(config, physics_hz=RUN_PHYSICS_HZ, read_in_wait=False)
             sup = build(config, clock, backplane.bus_factory, host=host, port=port,
-                        observer=observer)
+                        observer=observer, recorder=recorder)
             backplane.attach(sup)
         else:
-            sup = build(config, clock, host=host, port=port, observer=observer)
+            sup = build(config, clock, host=host, port=port, observer=observer,
+                        recorder=recorder)
     except Exception as exc:  # noqa: BLE001 - nothing is open yet; say what and leave
         if backplane is not None:
             backplane.close()
@@ -201,6 +205,14 @@ def host_name(text: str) -> str:
     return text
 
 
+def record_dir(text: str) -> str:
+    """`--record DIR`: a directory path (made if missing; relative to the working
+    directory)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a directory for the MCAP files")
+    return text
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="ramp", description=__doc__)
     parser.add_argument("--version", action="version", version=f"ramp {__version__}")
@@ -213,6 +225,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="address to serve on (default: from config)")
     run.add_argument("--port", type=port_number, default=None,
                      help="TCP port, 0-65535 (0 picks a free one)")
+    run.add_argument("--record", metavar="DIR", type=record_dir, default=None,
+                     help="record the run into MCAP files in DIR (over the config's "
+                          "recorder: dir; see `ramp log`)")
     run.add_argument("--log-level", default="info",
                      choices=["debug", "info", "warning", "error"])
     run.set_defaults(func=cmd_run)

@@ -9,8 +9,9 @@
 #
 # What it does: a `ramp` system user in dialout and plugdev; the checkout copied to
 # /opt/ramp with its own venv (`pip install '/opt/ramp[phidget]'`); /etc/ramp/ramp.yaml
-# from ramp.yaml if absent (yours is never overwritten); a udev rule giving plugdev the
-# Phidgets (USB vendor 06c2); the unit in /etc/systemd/system; daemon-reload; enable --now.
+# from ramp.yaml and scripts/ramp-service.yaml (the flight recorder) if absent (yours is
+# never overwritten); a udev rule giving plugdev the Phidgets (USB vendor 06c2); the unit
+# in /etc/systemd/system; daemon-reload; enable --now.
 set -euo pipefail
 
 SRC="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -19,7 +20,7 @@ ROOT=""
 PYTHON="${PYTHON:-python3}"
 
 usage() {
-    sed -n '2,13p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
+    sed -n '2,14p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
 }
 
 while [ $# -gt 0 ]; do
@@ -129,7 +130,13 @@ run mkdir -p "$CONF_DIR"
 if [ -e "$CONF_DIR/ramp.yaml" ]; then
     echo "    $CONF_DIR/ramp.yaml exists: kept as it is"
 else
+    # The robot's wiring, then what the service adds (the flight recorder, on).
     run install -m 0644 "$SRC/ramp.yaml" "$CONF_DIR/ramp.yaml"
+    if [ "$DRY_RUN" = 1 ]; then
+        printf '    cat %s >> %s\n' "$SRC/scripts/ramp-service.yaml" "$CONF_DIR/ramp.yaml"
+    else
+        { printf '\n'; cat "$SRC/scripts/ramp-service.yaml"; } >> "$CONF_DIR/ramp.yaml"
+    fi
 fi
 
 step "udev rule $RULE"

@@ -114,12 +114,12 @@ class TestClient:
 
 class Harness:
     def __init__(self, yaml_text: str = DEMO_YAML, world: Any = None,
-                 bus_factory: Any = None) -> None:
+                 bus_factory: Any = None, observer: Any = None, recorder: Any = None) -> None:
         self.clock = VirtualClock()
         self.world = world if world is not None else FakeWorld()
         self.config = config_from(yaml_text)
         self.sup = build(self.config, self.clock, bus_factory or self._bus,
-                         host="127.0.0.1", port=0)
+                         host="127.0.0.1", port=0, observer=observer, recorder=recorder)
         self.sup.start()
         self.clients: list[TestClient] = []
 
@@ -157,7 +157,7 @@ class SimHarness(Harness):
     (`ramp.simulation.backplane.SimBackplane`)."""
 
     def __init__(self, yaml_text: str = MARTE_YAML, wire_level: bool = True,
-                 seed: int = 0) -> None:
+                 seed: int = 0, recorder: Any = None) -> None:
         from firmware_like.marte import MarteWorld
         from ramp.simulation.backplane import SimBackplane
 
@@ -166,7 +166,7 @@ class SimHarness(Harness):
         self.world = MarteWorld(seed=seed)
         self.backplane = SimBackplane(self.config, self.world, wire_level=wire_level)
         self.sup = build(self.config, self.clock, self.backplane.bus_factory,
-                         host="127.0.0.1", port=0)
+                         host="127.0.0.1", port=0, recorder=recorder)
         self.backplane.attach(self.sup)
         self.sup.start()
         self.sup.settle()

@@ -33,6 +33,7 @@ from ramp.hal.interfaces import Bus
 from ramp.layers.module_distribution import Module
 from ramp.layers.robot_distribution.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S
 from ramp.modules import module_class
+from ramp.recorder.config import RECORDER_FIELDS, RecorderConfig
 from ramp.schema import Block, Field, shorten, validate
 
 #: A config file is a few kB; anything past this is refused before parsing.
@@ -207,6 +208,8 @@ class Config:
     stall_limit: float = 0.25
     buses: Mapping[str, BusConfig] = field(default_factory=dict)
     modules: Mapping[str, ModuleConfig] = field(default_factory=dict)
+    #: The flight recorder (`recorder:`), None when the block is absent: not recording.
+    recorder: RecorderConfig | None = None
     #: Line of some keys (`server.max_clients`), for checks made at run time.
     lines: Mapping[str, int] = field(default_factory=dict)
 
@@ -318,7 +321,7 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
         c.err("", 1, f"expected a mapping of sections at the top, got {_kind(root)}")
         return None, c.errors
     _report_bad_keys(c, root)
-    top = {"server", "watchdog", "scheduler", "buses", "modules"}
+    top = {"server", "watchdog", "scheduler", "buses", "modules", "recorder"}
     for k in root:
         if k not in top:
             c.err(str(k), root.lines.get(k, 1),
@@ -329,6 +332,7 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
     _check_host(c, root, server)
     wd = c.block(root, "watchdog", "watchdog", WATCHDOG_FIELDS)
     sched = c.block(root, "scheduler", "scheduler", SCHEDULER_FIELDS)
+    recorder = _recorder(c, root, name)
     buses, bus_classes = _buses(c, root)
     modules = _modules(c, root, buses, bus_classes)
     if c.errors:
@@ -341,7 +345,8 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
         stall_limit=sched["stall_limit"],
         buses=MappingProxyType(buses),
         modules=MappingProxyType(modules),
-        lines=MappingProxyType(_server_lines(root)),
+        recorder=recorder,
+        lines=MappingProxyType({**_lines(root, "server"), **_lines(root, "recorder")}),
     )
     return cfg, []
 
@@ -404,12 +409,37 @@ def valid_host(host: str) -> bool:
     return all(_HOST_LABEL.fullmatch(label) for label in labels)
 
 
-def _server_lines(root: MarkedMap) -> dict[str, int]:
-    """Lines of the server keys, for errors found at run time (`server.max_clients`)."""
-    raw = root.get("server")
+def _lines(root: MarkedMap, section: str) -> dict[str, int]:
+    """Lines of a section's keys, for errors found at run time (`server.max_clients`)."""
+    raw = root.get(section)
     if not isinstance(raw, MarkedMap):
         return {}
-    return {f"server.{k}": line for k, line in raw.lines.items() if isinstance(k, str)}
+    return {f"{section}.{k}": line for k, line in raw.lines.items() if isinstance(k, str)}
+
+
+def _recorder(c: _Checker, root: MarkedMap, file: str) -> RecorderConfig | None:
+    """`recorder: {dir, max_mb, keep}`: absent (or null) is off. A relative `dir` is
+    relative to the config file's directory, as a path in a file is read by whoever reads
+    the file (systemd starts the service in another working directory)."""
+    if root.get("recorder") is None:
+        return None
+    values = c.block(root, "recorder", "recorder", RECORDER_FIELDS)
+    raw = root["recorder"]
+    if not isinstance(raw, MarkedMap) or "dir" not in values:
+        return None
+    line = raw.lines.get("dir", raw.line)
+    directory = values["dir"]
+    if not directory.strip():
+        c.err("recorder.dir", line, "'' is not a directory for the MCAP files")
+        return None
+    path = Path(directory).expanduser()
+    if not path.is_absolute():
+        path = Path(file).parent / path
+    try:
+        return RecorderConfig(str(path), values["max_mb"], values["keep"])
+    except ConfigError as exc:  # pragma: no cover - the block check has seen every field
+        c.err(exc.key or "recorder", line, exc.detail)
+        return None
 
 
 def _buses(c: _Checker, root: MarkedMap) -> tuple[dict[str, BusConfig], dict[str, type[Bus]]]:

@@ -1,11 +1,11 @@
 """`ramp log plot`: the time series a team looks at after a run, on one page.
 
 Panels, top to bottom, sharing the time axis (seconds since the recording started):
-the battery voltage; the commands handed to each bus's drivers (wheel duties on the Base's
-bus, lift and chain on the BLE's); each numeric get property by name across modules
-(`vel` of the wheels, lift and chain, `pos` of the lift, `kg` of the load); the tick's
-lateness (p50, p99, max). Events are marked on every panel: watchdog trips, module faults,
-control changes, stalls, and logged errors.
+the battery voltage; the motor commands handed to each bus's drivers (wheel duties on the
+Base's bus, lift and chain on the BLE's; digital outputs such as LEDs are left out); each
+numeric get property by name across modules (`vel` of the wheels, lift and chain, `pos` of
+the lift, `kg` of the load); the tick's lateness (p50, p99, max). Events are marked on
+every panel: watchdog trips, module faults, control changes, stalls, and logged errors.
 
 The panels come from what the file holds, not from a list of MARTE's devices, so another
 robot's recording plots the same way. matplotlib is an optional extra (`pip install
@@ -67,6 +67,8 @@ class PlotData:
             return
         t = (t_ns - self.start) / 1e9
         if topic == TOPIC_COMMANDS:
+            if data.get("kind") == "output":
+                return  # LEDs and relays: the motor duties are what a team looks at
             bus, ch = str(data.get("bus")), str(data.get("channel"))
             _point(self.commands[bus], ch, t, data.get("duty"))
         elif topic == TOPIC_HEALTH:

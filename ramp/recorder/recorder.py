@@ -10,7 +10,8 @@ drop of an episode logs one warning.
 Times are the supervisor's clock in seconds (the `now` its tasks receive); see
 `writer.TimeBase` for how they become MCAP log times.
 
-Use::
+The supervisor does all of this itself when given a recorder (`ramp run --record DIR`,
+`ramp.runtime.build(..., recorder=rec)`: see `ramp.runtime.recording`). By hand::
 
     rec = Recorder(RecorderConfig("/var/lib/ramp/rec"))
     rec.start(clock.now())
@@ -67,9 +68,12 @@ _encode = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
 class Row(Protocol):
     """A get row, as `ramp.mcp.messages.Response`: `MODULE:DEVICE.PROP=(values)`."""
 
-    device: str
-    prop: str
-    values: tuple[Any, ...]
+    @property
+    def device(self) -> str: ...
+    @property
+    def prop(self) -> str: ...
+    @property
+    def values(self) -> tuple[Any, ...]: ...
 
 
 RowsSource = Callable[[], Sequence[Row]]
@@ -118,8 +122,12 @@ class Recorder:
         self.recording = False
 
     # -- lifecycle ----------------------------------------------------------------------------
-    def start(self, now: float) -> None:
-        """Open the first file (raises RecorderError if it cannot) and start the writer."""
+    def start(self, now: float, *, wait_for_file: bool = True) -> None:
+        """Start the writer. With `wait_for_file`, the first file is opened here (raises
+        RecorderError if it cannot be); without, the writer thread opens it, so a slow disk
+        never holds the caller (the supervisor's start-up), and a directory it cannot
+        write is logged once and retried every `retry_s` while records are dropped and
+        counted."""
         if self._thread is not None:
             return  # started once: a recorder is not restarted
         origin = self._origin_ns if self._origin_ns is not None else time.time_ns()
@@ -128,17 +136,17 @@ class Recorder:
         self._segments = SegmentWriter(
             Path(self.config.dir), self.config.max_bytes, self.config.keep, self.timebase,
             self._channels, compression=self._compression, session=self._session, **kwargs)
-        try:
-            path = self._segments.open_next()
-        except OSError as exc:
-            raise RecorderError(f"recorder: cannot write to {self.config.dir}: "
-                                f"{exc.strerror or exc}") from exc
+        if wait_for_file:
+            try:
+                self._segments.open_next()
+            except OSError as exc:
+                raise RecorderError(f"recorder: cannot write to {self.config.dir}: "
+                                    f"{exc.strerror or exc}") from exc
+            self._segments.announce()
         self._thread = WriterThread(self._queue, self._segments, flush_s=self._flush_s,
                                     retry_s=self._retry_s, final_metadata=self._final_metadata)
-        self._thread.start()
         self.recording = True
-        log.info("recorder: writing %s (new file every %g MB, keeping %d)", path,
-                 self.config.max_mb, self.config.keep)
+        self._thread.start()
 
     def close(self, timeout: float = 5.0) -> None:
         """Write what is queued, index and close the file. Idempotent.
@@ -217,11 +225,13 @@ class Recorder:
                                                 rows_schema(module, data))
         self._put(topic, t, _payload(data))
 
-    def command(self, t: float, bus: str, channel: str, duty: float) -> None:
-        """A command handed to a driver: `channel` is the device as `module.device`."""
+    def command(self, t: float, bus: str, channel: str, duty: float,
+                kind: str = "motor") -> None:
+        """A command handed to a driver: `channel` is the device as `module.device`; `kind`
+        is `motor` (a duty -1..1) or `output` (a digital output, 0 or 1)."""
         if self.recording:
             self._put(TOPIC_COMMANDS, t, _payload({"bus": bus, "channel": channel,
-                                                   "duty": duty}))
+                                                   "duty": duty, "kind": kind}))
 
     def module_state(self, t: float, module: str, state: str, reason: str = "") -> None:
         """A module went to `ok`, `fault` or `detached`."""

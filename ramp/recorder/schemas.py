@@ -18,9 +18,9 @@ Topics (`MODULE` is a module name from `ramp.yaml`; `robot` is reserved there, s
 | `/mcp/out` | `ramp.McpLine` | response line sent |
 | `/robot/get` | `ramp.robot.get` | sample of `robot:robot.get=()`'s rows (10 Hz) |
 | `/MODULE/get` | `ramp.MODULE.get` | sample of `MODULE:MODULE.get=()`'s rows (10 Hz) |
-| `/robot/commands` | `ramp.Command` | command handed to a driver (bus, channel, duty) |
+| `/robot/commands` | `ramp.Command` | command handed to a driver (bus, channel, duty, kind) |
 | `/robot/module_state` | `ramp.ModuleState` | module state change (ok, fault, detached) and why |
-| `/robot/events` | `ramp.Event` | watchdog, control, stall and other supervisor events |
+| `/robot/events` | `ramp.Event` | watchdog, control, stall, bus fault and other supervisor events |
 | `/log` | `foxglove.Log` | log record at WARNING or above |
 """
 
@@ -45,6 +45,7 @@ TOPIC_LOG = "/log"
 #: Event kinds the supervisor records (`Recorder.event`); `ramp log summary` counts them.
 EVENT_KINDS = {
     "watchdog_trip": "the watchdog stopped every module (expiry or its feeder lost)",
+    "watchdog": "the watchdog armed (motion) or went idle (nothing moving)",
     "control": "control acquired, released or taken over",
     "stall": "the tick loop stalled and every module was stopped",
     "stop": "robot.stop or a module stop request",
@@ -90,13 +91,15 @@ MCP_LINE = {
 
 COMMAND = {
     "title": "ramp.Command",
-    "description": "A command handed to a driver: duty -1..1 as the controller sees it "
-                   "(after polarity).",
+    "description": "A command handed to a driver: a motor's duty -1..1 as the controller "
+                   "sees it (after polarity), or a digital output's 0 or 1.",
     "type": "object",
     "properties": {
         "bus": {"type": "string", "description": "the bus (ramp.yaml buses: key)"},
         "channel": {"type": "string", "description": "the device, as module.device"},
         "duty": {"type": "number", "minimum": -1.0, "maximum": 1.0},
+        "kind": {"type": "string", "enum": ["motor", "output"],
+                 "description": "a motor channel, or a digital output (an LED, a relay)"},
     },
     "required": ["bus", "channel", "duty"],
     "additionalProperties": False,

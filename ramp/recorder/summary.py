@@ -98,6 +98,8 @@ class Summary:
         elif topic == TOPIC_HEALTH:
             self._health(t, data)
         elif topic == TOPIC_COMMANDS:
+            if data.get("kind") == "output":
+                return  # an LED or a relay: not motion
             channel = str(data.get("channel", ""))
             module = channel.split(".", 1)[0]
             duties = self._duty[module]

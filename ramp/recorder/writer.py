@@ -175,6 +175,11 @@ class SegmentWriter:
         self._remove_old()
         return path
 
+    def announce(self) -> None:
+        """Log where the recording goes (once, when its first file is open)."""
+        log.info("recorder: writing %s (new file every %g MB, keeping %d)", self.path,
+                 self.max_bytes / 1e6, self.keep)
+
     def _remove_old(self) -> None:
         files = recording_files(self.directory)
         for _, old in files[:max(0, len(files) - self.keep)]:
@@ -290,6 +295,8 @@ class WriterThread(threading.Thread):
 
     def run(self) -> None:
         self._last_flush = time.monotonic()
+        if not self.segments.is_open:
+            self._reopen()  # the recorder left the first file to this thread
         while True:
             stopping = self._stop_event.is_set()
             self._drain()
@@ -339,6 +346,8 @@ class WriterThread(threading.Thread):
             return False
         if self.failed_at is not None:
             log.info("recorder: writing again, to %s", path)
+        elif self.segments.files_opened == 1:
+            self.segments.announce()
         self.failed_at = None
         return True
 

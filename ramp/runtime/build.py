@@ -11,6 +11,7 @@ layers), the module registry, the watchdog and the robot layer, then the server.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from ramp.clock import Clock, MonotonicClock
 from ramp.config import BusConfig, Config
@@ -27,9 +28,12 @@ from ramp.layers.robot_distribution import (
 from ramp.layers.server import McpServer
 from ramp.modules import module_class
 from ramp.runtime.buses import BusManager
-from ramp.runtime.observers import Observer, overridden
+from ramp.runtime.observers import Observer, fan_out, overridden
 from ramp.runtime.supervisor import Supervisor
 from ramp.scheduler import Scheduler
+
+if TYPE_CHECKING:
+    from ramp.recorder.recorder import Recorder
 
 BusFactory = Callable[[BusConfig], Bus]
 
@@ -41,9 +45,12 @@ def default_bus_factory(bc: BusConfig) -> Bus:
 
 def build(config: Config, clock: Clock | None = None, bus_factory: BusFactory | None = None,
           *, host: str | None = None, port: int | None = None,
-          observer: Observer | None = None) -> Supervisor:
+          observer: Observer | None = None, recorder: Recorder | None = None) -> Supervisor:
     """A supervisor for `config`, not started yet (`start()`, then `settle()`, then run its
     scheduler). `host`/`port` override the config's server address (`--host`, `--port`).
+    `recorder` (not started yet; `ramp.runtime.recording.recorder_for`) records the run:
+    the supervisor starts it, feeds it through the observer points beside `observer`, and
+    closes it at shutdown.
     Raises ConfigError for what only building can find (two devices on one channel ...)."""
     clock = clock or MonotonicClock()
     scheduler = Scheduler(clock, config.rate_hz, stall_limit=config.stall_limit)
@@ -77,7 +84,13 @@ def build(config: Config, clock: Clock | None = None, bus_factory: BusFactory | 
                        port=port if port is not None else config.server.port,
                        max_clients=config.server.max_clients, max_line=config.server.max_line,
                        max_output=config.server.max_output)
-    sup = Supervisor(config, clock, scheduler, manager, registry, robot, server, observer)
+    if recorder is not None:
+        from ramp.runtime.recording import RecorderObserver
+
+        outputs = [ch.label for bus in buses.values() for ch in bus.outputs]
+        observer = fan_out(RecorderObserver(recorder, outputs), observer)
+    sup = Supervisor(config, clock, scheduler, manager, registry, robot, server, observer,
+                     recorder)
     scheduler.on_stall = sup.on_stall
     if observer is not None:
         _connect(sup, observer)

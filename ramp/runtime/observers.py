@@ -30,11 +30,15 @@ The points (method, when, and the layer hook it is connected to):
 - `stopping(supervisor)`: at shutdown, before the motors stop and the buses close.
 
 Times are the supervisor's clock (`t`, seconds), as its tasks see it.
+
+Several observers at once (the flight recorder and a benchmark's, say): `fan_out(a, b)`
+makes one that calls, at each point, only those of them that override it, in order.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 from ramp.layers.robot_distribution import Client
 from ramp.mcp.protocol import TooLong
@@ -88,5 +92,71 @@ class Observer:
 
 
 def overridden(observer: Observer, point: str) -> bool:
-    """True when `observer` does something at `point` (its class overrides the method)."""
+    """True when `observer` does something at `point` (its class overrides the method, or,
+    for a fan-out, one of its observers does)."""
+    if isinstance(observer, FanOut):
+        return bool(observer.at[point])
     return getattr(type(observer), point) is not getattr(Observer, point)
+
+
+class FanOut(Observer):
+    """Several observers as one: each point calls the observers that override it, in the
+    order given. A point none of them overrides stays unconnected (`overridden` is False),
+    so it costs nothing, as with a single observer."""
+
+    def __init__(self, observers: tuple[Observer, ...]) -> None:
+        self.observers = observers
+        self.at: dict[str, tuple[Callable[..., Any], ...]] = {
+            point: tuple(getattr(o, point) for o in observers if overridden(o, point))
+            for point in POINTS}
+
+    def _call(self, point: str, *args: Any) -> None:
+        for method in self.at[point]:
+            method(*args)
+
+    def started(self, supervisor: Supervisor) -> None:
+        for o in self.observers:
+            o.started(supervisor)
+
+    def stopping(self, supervisor: Supervisor) -> None:
+        for o in self.observers:
+            o.stopping(supervisor)
+
+    def message_in(self, t: float, client: Client, message: bytes | TooLong) -> None:
+        self._call("message_in", t, client, message)
+
+    def message_out(self, t: float, client: Client, line: bytes) -> None:
+        self._call("message_out", t, client, line)
+
+    def command(self, t: float, bus: str, channel: str, value: float) -> None:
+        self._call("command", t, bus, channel, value)
+
+    def module_state(self, t: float, module: str, state: str, reason: str) -> None:
+        self._call("module_state", t, module, state, reason)
+
+    def watchdog(self, t: float, state: str, why: str) -> None:
+        self._call("watchdog", t, state, why)
+
+    def control(self, t: float, owner: str, peer: str) -> None:
+        self._call("control", t, owner, peer)
+
+    def stall(self, t: float, gap_s: float, unit: str) -> None:
+        self._call("stall", t, gap_s, unit)
+
+    def bus_fault(self, t: float, bus: str, reason: str) -> None:
+        self._call("bus_fault", t, bus, reason)
+
+    def tick(self, t: float, late_s: float) -> None:
+        self._call("tick", t, late_s)
+
+    def tick_done(self, t: float, busy_s: float) -> None:
+        self._call("tick_done", t, busy_s)
+
+
+def fan_out(*observers: Observer | None) -> Observer | None:
+    """One observer for all those given (None ones left out): None, the only one, or a
+    `FanOut`."""
+    present = tuple(o for o in observers if o is not None)
+    if not present:
+        return None
+    return present[0] if len(present) == 1 else FanOut(present)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from ramp.clock import Clock
 from ramp.config import Config
@@ -28,6 +29,9 @@ from ramp.runtime.observers import Observer
 from ramp.runtime.stall_guard import StallGuard
 from ramp.scheduler import Scheduler
 
+if TYPE_CHECKING:
+    from ramp.recorder.recorder import Recorder
+
 log = logging.getLogger("ramp.supervisor")
 
 
@@ -36,7 +40,8 @@ class Supervisor:
 
     def __init__(self, config: Config, clock: Clock, scheduler: Scheduler,
                  buses: BusManager, registry: ModuleRegistry, robot: RobotDistribution,
-                 server: McpServer, observer: Observer | None = None) -> None:
+                 server: McpServer, observer: Observer | None = None,
+                 recorder: Recorder | None = None) -> None:
         self.config = config
         self.clock = clock
         self.scheduler = scheduler
@@ -45,6 +50,9 @@ class Supervisor:
         self.robot = robot
         self.server = server
         self.observer = observer
+        #: The flight recorder (`ramp.runtime.recording`), or None when not recording.
+        self.recorder = recorder
+        self._log_handler: logging.Handler | None = None
         self.stall_guard = StallGuard(self, config.stall_limit)
         self.started_at = 0.0
         self.running = False
@@ -75,15 +83,19 @@ class Supervisor:
 
     def health(self) -> Health:
         s = self.scheduler.stats
+        rec = self.recorder
         return Health(uptime=self.clock.now() - self.started_at, rate_hz=self.scheduler.rate_hz,
                       late_us=s.percentiles(), overruns=s.overruns,
-                      clients=len(self.server.clients))
+                      clients=len(self.server.clients),
+                      recorder_dropped=rec.dropped if rec is not None else None)
 
     # -- lifecycle ----------------------------------------------------------------------------
     def start(self) -> None:
         """Open every bus (missing ones are retried later), attach modules, start serving."""
         now = self.clock.now()
         self.started_at = now
+        if self.recorder is not None:
+            self._start_recorder(now)
         self.bus_manager.start(now)
         sched = self.scheduler
         sched.add_task("buses", sched.rate_hz, self.bus_manager.tick)
@@ -123,14 +135,34 @@ class Supervisor:
 
     def shutdown(self) -> None:
         """Stop every motor (zeros on the wire), close devices and the server. Idempotent."""
-        if not self.running and not self.bus_manager.any_open():
-            return
-        if self.running and self.observer is not None:
-            self.observer.stopping(self)
-        self.running = False
-        self.robot.stop_all("shutdown", self.clock.now())
-        self.bus_manager.close_all()  # zeros on the wire first, then the ports close
-        self.server.close()
+        if self.running or self.bus_manager.any_open():
+            if self.running and self.observer is not None:
+                self.observer.stopping(self)
+            self.running = False
+            self.robot.stop_all("shutdown", self.clock.now())
+            self.bus_manager.close_all()  # zeros on the wire first, then the ports close
+            self.server.close()
+        self._close_recorder()
+
+    # -- the flight recorder ------------------------------------------------------------------
+    def _start_recorder(self, now: float) -> None:
+        """Recording starts before the buses open, so the modules' attachment is recorded.
+        The first file is opened by the recorder's writer thread: a slow or unwritable
+        disk never holds the start-up, it only costs records (counted in `robot.get`)."""
+        assert self.recorder is not None
+        self.recorder.start(now, wait_for_file=False)
+        self._log_handler = self.recorder.log_handler(self.clock.now)
+        logging.getLogger("ramp").addHandler(self._log_handler)
+
+    def _close_recorder(self) -> None:
+        """After the motors have stopped: the last records written, the file indexed."""
+        from ramp.runtime.recording import CLOSE_TIMEOUT_S
+
+        if self._log_handler is not None:
+            logging.getLogger("ramp").removeHandler(self._log_handler)
+            self._log_handler = None
+        if self.recorder is not None:
+            self.recorder.close(CLOSE_TIMEOUT_S)
 
     # -- stalls -------------------------------------------------------------------------------
     def stop_all_motors(self, alive_mark: float, lock_wait: float = 0.02) -> None:

@@ -1,10 +1,12 @@
-"""The runtime's observer points (README, "Observer points"): what the flight recorder will be
+"""The runtime's observer points (README, "Observer points"): what the flight recorder is
 wired to. Each point is seen with the supervisor's time; a point nobody observes keeps its
 hook at None."""
 
 from __future__ import annotations
 
 from typing import Any
+
+import pytest
 
 from ramp.clock import VirtualClock
 from ramp.hal.simio import SimBus
@@ -120,3 +122,28 @@ def test_unobserved_points_cost_nothing() -> None:
     assert sup.watchdog.on_change is None and sup.robot.on_control is None
     assert sup.bus_manager.on_fault is None and sup.scheduler.on_tick is None
     sup.shutdown()
+
+
+class WatchdogTimes(Observer):
+    def __init__(self) -> None:
+        self.changes: list[tuple[float, str, str]] = []
+
+    def watchdog(self, t: float, state: str, why: str) -> None:
+        self.changes.append((t, state, why))
+
+
+def test_robot_stop_disarms_the_watchdog_at_the_supervisors_time() -> None:
+    """`robot:robot.stop=()` used to disarm the watchdog at time 0.0 (a default argument),
+    so a recording put that event hours before the run on the robot's monotonic clock."""
+    rec = WatchdogTimes()
+    h = Harness(rec)
+    h.clock.advance(100.0)
+    c = h.connect()
+    assert c.ask("demo:motor.vel=(50)") == ""
+    h.advance(0.2)
+    assert c.ask("robot:robot.stop=()") == ""
+    now = h.clock.now()
+    h.sup.shutdown()
+    c.sock.close()
+    assert [s for _, s, _ in rec.changes] == ["armed", "idle"]
+    assert rec.changes[-1][0] == pytest.approx(now, abs=0.01)

@@ -1,6 +1,8 @@
-"""A simulated MARTE run recorded from outside the supervisor (tests/hil_sim/recorder_sample.py)
-and read back with the `mcap` reader: schemas, MCP lines per client in order, 10 Hz
-sampling, commands matching what the Sabertooth emulators received, and the summary."""
+"""A simulated MARTE run recorded by the supervisor itself on a virtual clock
+(tests/hil_sim/recorder_sample.py) and read back with the `mcap` reader: schemas, MCP lines
+per client in order, 10 Hz sampling, commands matching what the Sabertooth emulators
+received, events, and the summary. (tests/hil_sim/test_recorder_run.py does the same
+against real `ramp run --record` processes on the wall clock.)"""
 
 from __future__ import annotations
 
@@ -32,7 +34,7 @@ def messages(sample: tuple[Path, dict[str, Any]]) -> list[tuple[str, int, Any, A
 def test_every_message_matches_its_channels_schema(messages: list[Any]) -> None:
     topics = {topic for topic, *_ in messages}
     assert topics == {"/mcp/in", "/mcp/out", "/robot/get", "/base/get", "/ble/get",
-                      "/robot/commands", "/robot/events", "/log"}
+                      "/robot/commands", "/robot/events", "/robot/module_state", "/log"}
     validators: dict[str, Any] = {}
     for topic, _, data, schema in messages:
         if topic not in validators:
@@ -68,7 +70,7 @@ def test_commands_match_what_the_emulators_received(sample: tuple[Path, dict[str
     received: dict[str, list[float]] = sample[1]["emulator"]
     commanded: dict[str, list[float]] = {}
     for tp, _, d, _ in messages:
-        if tp == "/robot/commands":
+        if tp == "/robot/commands" and d["kind"] == "motor":
             seq = commanded.setdefault(d["channel"], [])
             if not seq or seq[-1] != d["duty"]:
                 seq.append(d["duty"])
@@ -86,8 +88,8 @@ def test_commands_match_what_the_emulators_received(sample: tuple[Path, dict[str
                 i += 1
             assert i < len(want), f"{label}: {value} reached the wire but was not recorded"
         assert abs(want[-1] - got[-1]) <= step
-    assert max(commanded["base.lf_wheel"]) == pytest.approx(0.6)
-    assert min(commanded["base.rf_wheel"]) == pytest.approx(-0.6)  # polarity -1
+    assert max(commanded["base.lf_wheel"]) == pytest.approx(1.0)
+    assert min(commanded["base.rf_wheel"]) == pytest.approx(-1.0)  # polarity -1
 
 
 def test_the_summary_tells_the_run(sample: tuple[Path, dict[str, Any]],
@@ -96,14 +98,32 @@ def test_the_summary_tells_the_run(sample: tuple[Path, dict[str, Any]],
     r = json.loads(capsys.readouterr().out)
     assert len(r["clients"]) == 3 and r["duration_s"] == pytest.approx(DURATION, abs=0.1)
     assert [o["owner"] for o in r["owners"]] == ["operator"]
-    assert len(r["watchdog_trips"]) == 1 and 17.0 <= r["watchdog_trips"][0] <= 17.8
+    assert len(r["watchdog_trips"]) == 1 and 24.0 <= r["watchdog_trips"][0] <= 24.5
     assert r["error_responses"] == {"bad_params": 1, "not_owner": 1}
-    assert r["motion_s"]["base"] == pytest.approx(8.5, abs=0.2)
+    assert r["motion_s"]["base"] == pytest.approx(17.5, abs=0.2)  # 0.5-13 s, 35-40 s
     assert r["motion_s"]["ble"] > 15
     volt = r["battery"]["base:battery.volt"]
     assert 15 < volt["min"] < volt["max"] < 30
     assert r["log"]["warnings"] >= 1  # the watchdog's own warning, through the log handler
     assert r["recorder_dropped"] == 0 == sample[1]["dropped"]
+    assert r["events"]["control"] == 2  # acquired, released
+
+
+def test_events_and_module_states_are_the_supervisors_own(messages: list[Any]) -> None:
+    events = [(t, d["kind"], d["text"]) for tp, t, d, _ in messages if tp == "/robot/events"]
+    kinds = [k for _, k, _ in events]
+    assert kinds.count("watchdog_trip") == 1
+    trip = next(e for e in events if e[1] == "watchdog_trip")
+    assert trip[2] == "every module stopped: expired"
+    start = messages[0][1]
+    assert 24.2 <= (trip[0] - start) / 1e9 <= 24.3  # 1 s after the last heartbeat (23.25 s)
+    assert [e[2].split(" (")[0] for e in events if e[1] == "control"] == ["operator", "released"]
+    assert ("watchdog", "armed: motion") in [(k, x) for _, k, x in events]
+    states = [(d["module"], d["state"]) for tp, _, d, _ in messages
+              if tp == "/robot/module_state"]
+    assert states == [("base", "ok"), ("ble", "ok")]  # attached at start, before any client
+    health = [d for tp, _, d, _ in messages if tp == "/robot/get"]
+    assert all(h["recorder"]["dropped"] == 0 for h in health)
 
 
 def test_the_plot_is_drawn(sample: tuple[Path, dict[str, Any]], tmp_path: Path) -> None:

@@ -90,6 +90,11 @@ def test_figures_are_real_measurements_beside_baselines(smoke: dict[str, Any]) -
     assert rc["encode"]["writer"]["records"] == rc["encode"]["writer"]["of_queued"] > 0
     assert rc["tick"]["on"]["written"] > 0 and rc["tick"]["on"]["ticks"] > 0
     assert rc["tick"]["slow_disk"]["late_us"]["p50"]["baseline"] > 0
+    rr = rc["ramp_run"]
+    assert rr["off"]["dropped"] is None and rr["on"]["dropped"] is not None
+    assert rr["on"]["messages_in_files"] > 0 and rr["on"]["ticks"] > 0
+    assert rr["slow_disk"]["late_us"]["p50"]["baseline"] > 0
+    assert rr["slow_disk"]["dropped"] is not None
 
     pc = smoke["perception"]
     for key in ("localize_ms", "detect_ms"):

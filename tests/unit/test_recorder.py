@@ -109,7 +109,7 @@ def test_every_channel_is_present_with_a_valid_schema_and_valid_messages(
     assert by_topic["/base/get"] == {"lf_wheel": {"vel": 40}, "battery": {"volt": 24.5},
                                      "l_button": {"press": 0}}
     assert by_topic["/robot/commands"] == {"bus": "base_motors", "channel": "base.lf_wheel",
-                                           "duty": 0.6}
+                                           "duty": 0.6, "kind": "motor"}
     log = by_topic["/log"]
     assert log["level"] == 3 and log["message"] == "bus ble_motors fault: gone"
     assert log["name"] == "ramp.test_recorder" and log["line"] > 0

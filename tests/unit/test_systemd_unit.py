@@ -69,6 +69,8 @@ def one(unit: dict[str, dict[str, list[str]]], section: str, key: str) -> str:
     ("CPUSchedulingPriority", "20"),
     ("LimitRTPRIO", "20"),
     ("LimitNOFILE", "8192"),
+    ("StateDirectory", "ramp"),
+    ("StateDirectoryMode", "0750"),
 ])
 def test_service_key(unit: dict[str, dict[str, list[str]]], key: str, value: str) -> None:
     assert one(unit, "Service", key) == value
@@ -198,12 +200,32 @@ def test_install_into_a_root_is_idempotent_and_keeps_the_config(tmp_path: Path) 
     rule = (tmp_path / "etc" / "udev" / "rules.d" / "60-ramp-phidgets.rules").read_text()
     assert 'SUBSYSTEM=="usb", ATTRS{idVendor}=="06c2", MODE="0660", GROUP="plugdev"' in rule
     config = tmp_path / "etc" / "ramp" / "ramp.yaml"
-    assert config.read_text() == (REPO / "ramp.yaml").read_text()
+    assert config.read_text() == ((REPO / "ramp.yaml").read_text() + "\n"
+                                  + (REPO / "scripts" / "ramp-service.yaml").read_text())
     config.write_text("# edited on the robot\n")
     second = install("--root", str(tmp_path))
     assert second.returncode == 0, second.stderr
     assert "exists: kept as it is" in second.stdout
     assert config.read_text() == "# edited on the robot\n"
+
+
+def test_the_installed_config_records_into_the_units_state_directory(
+        tmp_path: Path, unit: dict[str, dict[str, list[str]]]) -> None:
+    """The service's config turns the flight recorder on, in a directory the unit lets it
+    write (ProtectSystem=strict leaves only StateDirectory= writable), and passes
+    `ramp check`."""
+    from ramp.config import check_config
+
+    assert install("--root", str(tmp_path)).returncode == 0
+    config, errors = check_config(tmp_path / "etc" / "ramp" / "ramp.yaml")
+    assert errors == [] and config is not None and config.recorder is not None
+    state = Path("/var/lib") / one(unit, "Service", "StateDirectory")
+    assert Path(config.recorder.dir).is_relative_to(state)
+    assert config.recorder.max_mb * config.recorder.keep <= 4000  # a few GB of an SD card
+    assert set(config.modules) == {"base", "ble"}  # the robot's wiring, unchanged
+    dry = install("--dry-run", "--root", str(tmp_path / "dry"))
+    assert f"cat {REPO}/scripts/ramp-service.yaml >> {tmp_path}/dry/etc/ramp/ramp.yaml" \
+        in dry.stdout
 
 
 def test_unknown_option_is_refused() -> None:

@@ -49,6 +49,8 @@ class Health:
     late_us: tuple[float, float, float]
     overruns: int
     clients: int
+    #: Records the flight recorder has lost (a slow or full disk); None when not recording.
+    recorder_dropped: int | None = None
 
 
 class TickCount(Protocol):
@@ -104,12 +106,16 @@ class RobotRequests(Module):
                                 (prop, kind, unit) if unit else (prop, kind)))
         out.extend(Response("robot", name, "property", ("state", "name"))
                    for name in self.layer.slots)
+        if self.layer.recording():
+            out.append(Response("robot", "recorder", "property", ("dropped", "int")))
         out.extend(Response("robot", fn.device, "kind", (fn.name, fn.kind))
                    for fn in self.functions.values())
         return out
 
     def stop(self) -> None:
-        self.layer.stop_all("robot.stop")
+        # The watchdog is disarmed by the request path (a stop that leaves nothing moving),
+        # with the message's time: an observer sees the change when it happened.
+        self.layer.stop_modules("robot.stop")
 
     def is_moving(self) -> bool:
         return False
@@ -273,6 +279,10 @@ class RobotDistribution:
                         " module", client.peer)
             self._stop_keep_trip("commanding client lost")
 
+    def stop_modules(self, reason: str) -> None:
+        """Every attached module stops; the watchdog state is left to the caller."""
+        self._stop_keep_trip(reason)
+
     def _stop_keep_trip(self, reason: str) -> None:
         """Every attached module stops; the watchdog state is left to the caller."""
         self.changes += 1
@@ -303,4 +313,10 @@ class RobotDistribution:
         ]
         rows.extend(Response("robot", name, "state", (slot.state,))
                     for name, slot in self.slots.items())
+        if h.recorder_dropped is not None:
+            rows.append(Response("robot", "recorder", "dropped", (h.recorder_dropped,)))
         return rows
+
+    def recording(self) -> bool:
+        """A flight recorder is on (`robot.get` then has `robot:recorder.dropped=(n)`)."""
+        return self._health().recorder_dropped is not None
