@@ -320,7 +320,8 @@ def test_files_rotate_at_max_mb_and_only_keep_files_remain(tmp_path: Path) -> No
         messages = read(path)
         times = [t for _, t, *_ in messages]
         spans.append((min(times), max(times)))
-        assert {tp for tp, *_ in messages} >= {"/mcp/in", "/mcp/out"}
+        if k < len(files) - 1:  # the last one may have begun after the client's last line
+            assert {tp for tp, *_ in messages} >= {"/mcp/in", "/mcp/out"}
         data = path.read_bytes()
         summary_start = struct.unpack("<Q", data[-28:-20])[0]  # the footer's first field
         if k < len(files) - 1:  # rotated: its records end past 20 kB, within one chunk
