@@ -235,8 +235,9 @@ class SegmentWriter:
             _sync(self._file)
             self._unsynced = False
         if self._file.tell() >= self.max_bytes:
+            # The next record opens the next file (the writer thread's drain does), so a run
+            # that ends right after a rotation leaves no empty file behind.
             self.finish()
-            self.open_next()
 
     def finish(self, extra: Mapping[str, str] | None = None) -> None:
         """Write the summary and footer (the file is then indexed) and close it."""

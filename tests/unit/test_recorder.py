@@ -409,3 +409,25 @@ def test_config_block_is_checked_with_key_paths() -> None:
         RecorderConfig("d", max_mb=-1)
     with pytest.raises(ConfigError, match=r"recorder\.dir"):
         RecorderConfig("  ")
+
+
+def test_a_run_that_ends_just_after_a_rotation_leaves_no_empty_file(tmp_path: Path) -> None:
+    from ramp.recorder.writer import SegmentWriter
+
+    channels = {s.topic: s for s in FIXED_CHANNELS}
+    seg = SegmentWriter(tmp_path, 4000, 10, TimeBase(0.0, ORIGIN), channels,
+                        compression="none")
+    seg.open_next()
+    topic = FIXED_CHANNELS[0].topic
+    t = 0.0
+    first = seg.path
+    for _ in range(1000):  # fill the file until the flush that rotates it
+        t += 0.01
+        seg.write(topic, t, b'{"x": "' + b"y" * 200 + b'"}')
+        seg.flush(sync=False)
+        if not seg.is_open or seg.path != first:
+            break
+    seg.finish()  # the run ends here, before another record arrives
+    files = recording_files(tmp_path)
+    assert len(files) == 1
+    assert read_file(files[0][1])["messages"]
