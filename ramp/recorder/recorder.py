@@ -27,9 +27,7 @@ The supervisor does all of this itself when given a recorder (`ramp run --record
 
 from __future__ import annotations
 
-import json
 import logging
-import math
 import threading
 import time
 from collections import deque
@@ -39,6 +37,7 @@ from typing import Any, Protocol
 
 from ramp.errors import RampError
 from ramp.recorder.config import RecorderConfig
+from ramp.recorder.jsonbytes import json_payload
 from ramp.recorder.schemas import (
     EVENT_KINDS,
     FIXED_CHANNELS,
@@ -62,7 +61,6 @@ SAMPLE_HZ = 10.0
 #: A drop after the queue had emptied logs again, but not more often than this (s).
 DROP_WARNING_INTERVAL_S = 60.0
 
-_encode = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
 
 
 class Row(Protocol):
@@ -201,12 +199,12 @@ class Recorder:
     def mcp_in(self, t: float, client: str, line: bytes | str) -> None:
         """An MCP message as it arrived (without its `\\n`; a heartbeat is empty)."""
         if self.recording:
-            self._put(TOPIC_MCP_IN, t, _payload({"client": client, "line": _text(line)}))
+            self._put(TOPIC_MCP_IN, t, json_payload({"client": client, "line": _text(line)}))
 
     def mcp_out(self, t: float, client: str, line: bytes | str) -> None:
         """The response line sent for a message (its trailing `\\n` is left out)."""
         if self.recording:
-            self._put(TOPIC_MCP_OUT, t, _payload({"client": client, "line": _text(line)}))
+            self._put(TOPIC_MCP_OUT, t, json_payload({"client": client, "line": _text(line)}))
 
     def health(self, t: float, rows: Iterable[Row]) -> None:
         """`robot.get`'s rows (the supervisor's health)."""
@@ -223,20 +221,20 @@ class Recorder:
         if topic not in self._channels:
             self._channels[topic] = ChannelSpec(topic, f"ramp.{module}.get",
                                                 rows_schema(module, data))
-        self._put(topic, t, _payload(data))
+        self._put(topic, t, json_payload(data))
 
     def command(self, t: float, bus: str, channel: str, duty: float,
                 kind: str = "motor") -> None:
         """A command handed to a driver: `channel` is the device as `module.device`; `kind`
         is `motor` (a duty -1..1) or `output` (a digital output, 0 or 1)."""
         if self.recording:
-            self._put(TOPIC_COMMANDS, t, _payload({"bus": bus, "channel": channel,
+            self._put(TOPIC_COMMANDS, t, json_payload({"bus": bus, "channel": channel,
                                                    "duty": duty, "kind": kind}))
 
     def module_state(self, t: float, module: str, state: str, reason: str = "") -> None:
         """A module went to `ok`, `fault` or `detached`."""
         if self.recording:
-            self._put(TOPIC_MODULE_STATE, t, _payload({"module": module, "state": state,
+            self._put(TOPIC_MODULE_STATE, t, json_payload({"module": module, "state": state,
                                                        "reason": reason}))
 
     def event(self, t: float, kind: str, text: str) -> None:
@@ -244,14 +242,14 @@ class Recorder:
         if self.recording:
             if kind not in EVENT_KINDS:
                 text, kind = f"{kind}: {text}", "note"
-            self._put(TOPIC_EVENTS, t, _payload({"kind": kind, "text": text}))
+            self._put(TOPIC_EVENTS, t, json_payload({"kind": kind, "text": text}))
 
     def log(self, t: float, level: int, message: str, name: str, file: str, line: int) -> None:
         """A log record as `foxglove.Log` (`level` in Foxglove's numbers, 3 = WARNING)."""
         if not self.recording or self.timebase is None:
             return
         sec, nsec = divmod(self.timebase.ns(t), 1_000_000_000)
-        self._put(TOPIC_LOG, t, _payload({
+        self._put(TOPIC_LOG, t, json_payload({
             "timestamp": {"sec": sec, "nsec": nsec}, "level": level, "message": message,
             "name": name, "file": file, "line": max(0, line)}))
 
@@ -267,7 +265,7 @@ class Recorder:
         if topic not in self._channels:
             raise KeyError(f"recorder: no channel {topic}; declare it with add_channel")
         if self.recording:
-            self._put(topic, t, _payload(payload))
+            self._put(topic, t, json_payload(payload))
 
     # -- periodic sampling --------------------------------------------------------------------
     def add_rows_source(self, module: str, rows: RowsSource) -> None:
@@ -338,19 +336,3 @@ def _text(line: bytes | str) -> str:
     return line[:-1] if line.endswith("\n") else line
 
 
-def _payload(obj: Any) -> bytes:
-    """JSON bytes; a NaN or infinity (which JSON cannot carry) is written as null."""
-    try:
-        return _encode(obj).encode()
-    except ValueError:
-        return _encode(_finite(obj)).encode()
-
-
-def _finite(obj: Any) -> Any:
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_finite(v) for v in obj]
-    return obj

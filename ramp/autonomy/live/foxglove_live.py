@@ -30,9 +30,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import itertools
-import json
 import logging
-import math
 import threading
 import time
 from collections import deque
@@ -42,6 +40,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from ramp.autonomy.live import protocol
 from ramp.errors import RampError
+from ramp.recorder.jsonbytes import json_payload
 
 if TYPE_CHECKING:
     from websockets.asyncio.server import ServerConnection
@@ -53,7 +52,6 @@ DEFAULT_HOST = "127.0.0.1"
 DEFAULT_DEPTH = 8
 START_TIMEOUT_S = 5.0
 
-_encode = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
 
 
 class LiveViewError(RampError):
@@ -321,7 +319,7 @@ class FoxgloveLive:
         if timebase is None or loop is None:
             return  # not serving
         try:
-            data = _payload(payload)
+            data = json_payload(payload)
         except (TypeError, ValueError) as exc:
             # A payload JSON cannot carry is the producer's bug; it must not stop the tick
             # only because someone is watching. Counted, and said once per topic.
@@ -487,19 +485,3 @@ class FoxgloveLive:
             await client.wake.wait()
 
 
-def _payload(obj: Mapping[str, Any]) -> bytes:
-    """JSON bytes; a NaN or infinity (which JSON cannot carry) is sent as null."""
-    try:
-        return _encode(obj).encode()
-    except ValueError:
-        return _encode(_finite(obj)).encode()
-
-
-def _finite(obj: Any) -> Any:
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_finite(v) for v in obj]
-    return obj
