@@ -18,6 +18,7 @@ AUTONOMY_SECTIONS: tuple[str, ...] = (
         "planner",
         "rig",
         "obstacles",
+        "localizer",
     )
     if find_spec("ramp.autonomy") is not None else ())
 

@@ -140,6 +140,20 @@ def render(doc: dict[str, Any]) -> str:
                            ("emulator_scan_us", "emulator: one scan out")):
             out += _pcts(label, lc[key], " µs", ("p50", "p99", "max"))
         out += [_row("CPU % of a core at 40 scans/s", lc["cpu_pct_at_40_scans_per_s"], " %"), ""]
+    lo = doc.get("localizer")
+    if lo and "error" not in lo:
+        out += [f"**localizer** (one wall-based localization of a 1081-beam scan, "
+                f"~{lo['wall_points']} wall points; baseline: one `np.linalg.lstsq` line fit "
+                "of the same points)", "", HEAD]
+        for key, label in (("localize_us", "localize, start box hint"),
+                           ("track_us", "localize, odometry + yaw prior"),
+                           ("extract_us", "line extraction alone"),
+                           ("relevel_us", "tilted 4-8 deg: detect, re-level, localize")):
+            out += _pcts(label, lo[key], " µs", ("p50", "max"))
+        t = lo["tilted_outcomes"]
+        out += ["", f"Tilted scans ({lo['tilted_scans']}): {t['relevelled']} re-levelled and "
+                f"localized, {t['kept']} localized as they were, {t['lost']} reported lost.",
+                ""]
     a = doc.get("arena")
     if a and "error" not in a:
         out += ["**arena** (CPU per call in this process; baselines: the empty level arena's "
