@@ -112,6 +112,7 @@ class MissionRun:
         self.world = make_world(o)
         self.config = mission_config(load_autonomy_config(o.config), o.duration)
         self.error = ""
+        self.stop_requested = False  # `request_stop()`: end the run at the next tick
         self.wall_s = 0.0
         self.started_at = math.nan
         self.ended_at = math.nan
@@ -156,7 +157,7 @@ class MissionRun:
             waiting_ends = not self.options.realtime
 
             def over() -> bool:
-                return (mission.over or clock.now() >= end
+                return (mission.over or self.stop_requested or clock.now() >= end
                         or (waiting_ends and mission.state == "waiting_for_operator"))
 
             self.rig.scheduler.run(over)
@@ -172,6 +173,10 @@ class MissionRun:
             self._notify("finished")
             self.close()
         return self.summary()
+
+    def request_stop(self) -> None:
+        """End the run at the next tick (an observer that has seen enough, Ctrl-C)."""
+        self.stop_requested = True
 
     def close(self) -> None:
         if self.autonomy is not None:

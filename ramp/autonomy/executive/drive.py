@@ -10,9 +10,12 @@ localizer needs the robot standing still, so it stops to localize:
   robot should know where it really is before it turns;
 - before a leg driven backwards (docking) and at the end when asked (`final_fix`).
 
-After a fix that puts the robot more than `REPLAN_OFF_M` off the leg it drives (or after it
-went off the path) it plans again from where the robot really is (`replan`, when given); a fix
-that agrees with the plan keeps it, so the route does not change its mind at every stop. A fix
+It plans again from where the robot really is (`replan`, when given) after a fix before a
+turn (the planner then checks the turn's sweep from the true pose: the follower stops a few
+centimetres off the planned corner, and a turn near a wall has no more room than that),
+after a fix that puts the robot more than `REPLAN_OFF_M` off the leg it drives, and after it
+went off the path. A fix mid-stretch that agrees with the plan keeps it, so the route does not
+change its mind at every stop. A fix
 that fails is tried once more (re-levelled first when the localizer says where level is);
 still lost -> `lost`, and it never drives without a pose: the robot stops first.
 
@@ -51,7 +54,7 @@ DRIVING, FIXING = "driving", "fixing"
 TURN_FIX_M = 0.25  # moved at least this far since the last fix: localize before turning
 LOW_CONFIDENCE = 0.6  # below this (and above the mission's 0.5), stop and localize
 RESEND_S = 0.25
-REPLAN_OFF_M = 0.05  # a fix this far from the leg being driven: plan again from there
+REPLAN_OFF_M = 0.03  # a fix this far from the leg being driven: plan again from there
 
 
 class PlanDriver:
@@ -82,6 +85,7 @@ class PlanDriver:
         self._final = False
         self._retried = False
         self._off_path = False
+        self._before_turn = False
         self._last_status = ""
         self._sent: tuple[int, float] | None = None
         self._sent_at = -math.inf
@@ -116,6 +120,7 @@ class PlanDriver:
         if (status == FOLLOWING and moved >= self.every_m) or (
                 starting_turn and moved >= TURN_FIX_M):
             self._last_status = ""
+            self._before_turn = starting_turn
             return self._fix(now)
         self._last_status = status
         self._drive(cmd.speed, cmd.direction, now)
@@ -172,9 +177,9 @@ class PlanDriver:
             return Status.done(f"arrived at {describe(pose)}")
         self.state = DRIVING
         here = Pose(pose.x, pose.y, pose.yaw)
-        if self.replan is not None and (self._off_path or off_track(self.leg, here)
-                                        > REPLAN_OFF_M):
-            self._off_path = False
+        if self.replan is not None and (self._off_path or self._before_turn
+                                        or off_track(self.leg, here) > REPLAN_OFF_M):
+            self._off_path = self._before_turn = False
             result = self.replan(here)
             if not result.ok:
                 return Status.failed(f"no plan from {describe(pose)}: {result.reason}")

@@ -26,6 +26,8 @@ from ramp.autonomy.executive.kit import Kit, yaw_error
 from ramp.autonomy.executive.step import Step
 from ramp.autonomy.planning import (
     ArenaMap,
+    DigSites,
+    DigSpot,
     Path,
     Planner,
     PlannerConfig,
@@ -117,6 +119,27 @@ def plan_home(planner: Planner, pose: Pose) -> tuple[PlanResult, object]:
     return trim_dock(result), dock
 
 
+def choose_spot(planner: Planner, sites: DigSites, pose: Pose,
+                tries: int = 6) -> tuple[DigSpot | None, PlanResult]:
+    """The next digging spot and the plan there: the first of `DigSites`' ranking (nearest
+    row, cheapest trip) where the robot can turn full circle both where it starts digging and
+    where the creep ends, since it arrives there and leaves from there; a spot by a wall is
+    entered and left by manoeuvres the follower drives with only centimetres to spare. When
+    none of those can be reached, `DigSites.next_spot`'s choice."""
+    creep = sites.config.creep_m
+    for spot in sites.candidates(DOCK_REFERENCE, reachable_from=pose.xy):
+        x, y = spot.pose.x, spot.pose.y
+        if not (planner.can_spin_at(x, y) and planner.can_spin_at(x + creep, y)):
+            continue
+        result = planner.plan(pose, spot.pose.xy, goal_yaw=spot.pose.yaw)
+        if result.ok:
+            return spot, result
+        tries -= 1
+        if tries <= 0:
+            break
+    return sites.next_spot(pose, reference=DOCK_REFERENCE)
+
+
 class PlanPathToDig(Step):
     def step(self, now: float, dt: float) -> Status:
         ctx, kit = self.ctx, self.kit
@@ -131,7 +154,7 @@ class PlanPathToDig(Step):
             if not result.ok:  # that spot has become unreachable: pick another
                 ctx.dig_spot = None
         if ctx.dig_spot is None:
-            found, result = ctx.dig_sites.next_spot(pose, reference=DOCK_REFERENCE)
+            found, result = choose_spot(ctx.planner, ctx.dig_sites, pose)
             if found is None:
                 return Status.failed(f"no digging spot: {result.reason}")
             ctx.dig_spot = found

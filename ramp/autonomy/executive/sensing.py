@@ -136,13 +136,19 @@ def localize_records(kit: Kit, records: list[ScanRecord], *, use_prior: bool = T
 
 
 def apply_fix(kit: Kit, loc: Localization, now: float) -> PoseEstimate | None:
-    """Take a localization: a confident pose corrects the AHRS yaw and fixes the tracker;
-    a lost one leaves the tracker as it is (the caller decides). Returns the pose taken."""
+    """Take a localization: a confident pose corrects the AHRS yaw and fixes the tracker
+    (and, when the localizer found the scan tilted, its level goes to the AHRS and the
+    gimbal); a lost one leaves the tracker as it is (the caller decides). Returns the pose
+    taken."""
     kit.log["localizations"].append(loc)
     del kit.log["localizations"][:-50]
     pose = loc.pose
     if loc.lost or pose is None:
         return None
+    if loc.level is not None:  # the localizer found the scan tilted and levelled it itself
+        p = kit.perception
+        p.ahrs.level_hint(loc.level.roll, loc.level.pitch, loc.level.weight, t=loc.level.t)
+        p.leveller.level(0.0)
     kit.perception.ahrs.correct_yaw(pose.yaw, pose.confidence)
     kit.tracker.fix(now, pose.x, pose.y, pose.yaw, pose.confidence)
     return pose

@@ -1,0 +1,158 @@
+"""The executive's pieces on their own: its settings, the pose tracker, the start region's
+plans, the plan home's last leg, and the choice of digging spots."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+import pytest
+
+from firmware_like.marte import MarteWorld
+from ramp.autonomy.config import MISSION_FIELDS, parse_config
+from ramp.autonomy.executive.kit import Kit
+from ramp.autonomy.executive.plan import (
+    START_REGION,
+    StartPlanners,
+    choose_spot,
+    plan_home,
+    plan_vantage,
+    trim_dock,
+)
+from ramp.autonomy.executive.pose import PoseTracker
+from ramp.autonomy.executive.settings import ExecutiveSettings, settings_from
+from ramp.autonomy.odometry import Odometry
+from ramp.autonomy.planning import ArenaMap, DigSites, Disc, Planner, Pose, plan_to_dock
+from ramp.autonomy.planning.geometry import footprint_clearance
+from ramp.autonomy.planning.path import end_yaw, swept_poses
+from ramp.simulation.campaign import combination
+from ramp.statemachine import MissionContext
+
+
+# -- settings ------------------------------------------------------------------------------
+def test_every_executive_setting_is_a_checked_autonomy_yaml_tunable_with_the_same_default(
+        ) -> None:
+    for f in fields(ExecutiveSettings):
+        assert f.name in MISSION_FIELDS, f.name
+        assert MISSION_FIELDS[f.name].default == getattr(ExecutiveSettings(), f.name), f.name
+
+
+def test_settings_come_from_the_mission_block_and_bad_ones_name_their_line() -> None:
+    cfg, errors = parse_config("mission:\n  dig_target_kg: 12\n  max_replans: 2\n")
+    assert not errors and cfg is not None
+    s = settings_from(cfg.mission)
+    assert s.dig_target_kg == 12.0 and s.max_replans == 2 and isinstance(s.max_replans, int)
+    _, errors = parse_config("mission:\n  vantage_x_m: 1.4\n")
+    assert [str(e) for e in errors] == [
+        "autonomy.yaml:2: mission.vantage_x_m: 1.4 is not an x in the start region in m "
+        "(0.6-0.9)"]
+
+
+# -- pose tracker ----------------------------------------------------------------------------
+@dataclass
+class Gyro:
+    """What the tracker reads of an AHRS: settled, and the yaw."""
+
+    yaw: float = 0.0
+    settled: bool = True
+
+
+def test_the_tracker_moves_the_fix_by_odometry_and_turns_it_by_the_gyro() -> None:
+    odo, gyro = Odometry(), Gyro(yaw=1.0)  # the gyro's yaw has its own zero
+    tracker = PoseTracker(odo, gyro, decay_m=5.0)  # type: ignore[arg-type]
+    ctx = MissionContext()
+    tracker.bind(ctx)
+    assert ctx.pose is None and ctx.pose_confidence == 0.0
+    tracker.fix(0.0, 2.0, 1.0, math.pi / 2, 0.9)
+    odo.command(0.0, 100, 0)  # straight ahead: along +y in the arena
+    odo.advance(5.0)
+    gyro.yaw = 1.0 + 0.2  # meanwhile the gyro saw the chassis turn 0.2 rad left
+    tracker.tick(5.0, 5.0)
+    assert ctx.pose is not None
+    driven = odo.distance_m
+    assert ctx.pose.y == pytest.approx(1.0 + driven * math.cos(0.1), abs=1e-6)
+    assert ctx.pose.x == pytest.approx(2.0 - driven * math.sin(0.1), abs=1e-6)
+    assert ctx.pose.yaw == pytest.approx(math.pi / 2 + 0.2)
+    assert ctx.pose_confidence == pytest.approx(0.9 * math.exp(-driven / 5.0 - 0.2 / (4 * math.pi)))
+    assert ctx.pose_time_s == 0.0
+
+
+def test_before_the_ahrs_settles_the_tracker_turns_by_odometry() -> None:
+    odo, gyro = Odometry(), Gyro(settled=False)
+    tracker = PoseTracker(odo, gyro)  # type: ignore[arg-type]
+    tracker.fix(0.0, 1.0, 1.0, 0.0, 1.0)
+    odo.command(0.0, 50, 90)  # spin clockwise
+    odo.advance(2.0)
+    tracker.tick(2.0, 2.0)
+    assert tracker.pose is not None
+    assert tracker.pose[2] == pytest.approx(odo.pose[2])
+    assert tracker.pose[2] < -0.1
+
+
+def test_a_lost_tracker_has_no_pose_but_keeps_a_prior_unless_someone_else_drove() -> None:
+    odo = Odometry()
+    tracker = PoseTracker(odo, None)
+    assert tracker.lost and tracker.prior is None and tracker.estimate() is None
+    tracker.fix(0.0, 1.0, 2.0, 0.5, 0.8)
+    tracker.lose("the walls vanished")
+    assert tracker.lost and tracker.confidence == 0.0 and tracker.estimate() is None
+    assert tracker.prior == pytest.approx((1.0, 2.0, 0.5))
+    tracker.lose("operator had control", keep_prior=False)
+    assert tracker.prior is None
+    tracker.fix(1.0, 3.0, 2.0, 0.0, 0.7)
+    assert not tracker.lost and tracker.prior == pytest.approx((3.0, 2.0, 0.0))
+
+
+# -- the start region ------------------------------------------------------------------------
+@pytest.mark.parametrize("seed", range(8))
+def test_from_every_box_and_heading_the_vantage_point_is_reached_inside_the_start_region(
+        seed: int) -> None:
+    box, heading = combination(seed + 8 * 4)
+    world = MarteWorld.seeded(seed, box, float(heading))
+    kit = Kit.__new__(Kit)  # only its settings are read
+    kit.settings = ExecutiveSettings()
+    start = Pose(world.x, world.y, world.yaw)
+    result = plan_vantage(kit, StartPlanners(), start)
+    assert result.ok, result.reason
+    yaw = start.yaw
+    for leg in result.legs:
+        poses = swept_poses(leg, yaw)
+        # never a corner of the footprint past x = 1.5, where rocks may lie, nor in a wall
+        assert footprint_clearance(START_REGION, poses, 0.6, 0.375).min() > 0.0
+        yaw = end_yaw(leg, yaw)
+    end = result.legs[-1].points[-1]
+    assert abs(end[0] - 0.80) <= 0.12 and abs(math.remainder(yaw, 2 * math.pi)) < 1e-6
+
+
+def test_a_robot_already_at_the_vantage_point_only_squares_up() -> None:
+    kit = Kit.__new__(Kit)
+    kit.settings = ExecutiveSettings()
+    result = plan_vantage(kit, StartPlanners(), Pose(0.82, 2.9, math.radians(2.0)))
+    assert result.ok and len(result.legs) == 1 and len(result.legs[0].points) == 1
+    assert result.legs[0].final_yaw == 0.0
+
+
+# -- home and dig -------------------------------------------------------------------------------
+def test_the_plan_home_stops_its_reverse_leg_a_few_centimetres_short_of_the_wall() -> None:
+    planner = Planner(ArenaMap())
+    full, _dock = plan_to_dock(planner, Pose(5.0, 2.0, 0.0))
+    trimmed = trim_dock(full, 0.04)
+    assert len(trimmed.legs) == len(full.legs)
+    last_full, last = full.legs[-1], trimmed.legs[-1]
+    assert last.reverse and last.points[-1][0] == pytest.approx(last_full.points[-1][0] + 0.04)
+    assert np.all(np.diff(last.points[:, 0]) < 0)  # still straight back, towards the wall
+    again, dock = plan_home(planner, Pose(5.0, 2.0, 0.0))
+    assert dock is not None and again.legs[-1].points[-1][0] == pytest.approx(0.64)
+
+
+def test_digging_spots_leave_room_to_turn_where_the_robot_arrives_and_leaves() -> None:
+    planner = Planner(ArenaMap(obstacles=(Disc(2.5, 1.0, 0.15), Disc(3.0, 3.0, 0.12))))
+    sites = DigSites(planner)
+    start = Pose(1.0, 1.94, 0.0)
+    for _ in range(4):
+        spot, plan = choose_spot(planner, sites, start)
+        assert spot is not None and plan.ok
+        x, y = spot.pose.x, spot.pose.y
+        assert planner.can_spin_at(x, y) and planner.can_spin_at(x + sites.config.creep_m, y)
+        sites.mark_dug(spot)
