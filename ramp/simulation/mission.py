@@ -163,6 +163,10 @@ class MissionRun:
             self.rig.scheduler.run(over)
             self.ended_at = clock.now()
             self.rig.run_for(0.5)  # the last stop reaches the wheels, the trace shows it
+        except KeyboardInterrupt:  # Ctrl-C (or SIGTERM, see the CLI) ends a --realtime run
+            self.error = "interrupted"
+            if self.rig is not None:
+                self.ended_at = self.rig.clock.now()
         except Exception as exc:  # noqa: BLE001 - the run's outcome, reported as `error`
             log.exception("mission run failed")
             self.error = f"{type(exc).__name__}: {exc}"
@@ -239,6 +243,10 @@ class MissionRun:
         return doc
 
     # -- tasks and listeners -------------------------------------------------------------------
+    def mission_time(self, t: float) -> float:
+        """Seconds since the mission started (clock time `t`)."""
+        return t - self.started_at if math.isfinite(self.started_at) else 0.0
+
     def _changed(self, change: StateChange) -> None:
         self.changes.append(change)
         if self.on_change is not None:

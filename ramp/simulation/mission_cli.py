@@ -20,6 +20,7 @@ import argparse
 import json
 import logging
 import math
+import signal
 import sys
 from pathlib import Path
 from typing import Any
@@ -112,7 +113,8 @@ def _mission(args: argparse.Namespace) -> int:
         raise UsageError(f"--trace: cannot write {args.trace}: {exc.strerror or exc}") from exc
     try:
         try:
-            run = MissionRun(options, on_change=_print_change, trace_file=trace)
+            run = MissionRun(options, trace_file=trace)
+            run.on_change = lambda change: _print_change(run, change)
         except WorldFileError as exc:
             for err in exc.errors:
                 print(err, file=sys.stderr)
@@ -134,7 +136,9 @@ def _mission(args: argparse.Namespace) -> int:
             assert run.backend is not None
             host, port = run.backend.address
             print(f"ramp sim mission: running on the wall clock; MCP on {host}:{port} "
-                  f"(ramp-shell {host}:{port})", flush=True)
+                  f"(watch: ramp-shell {host}:{port}; take over: "
+                  "robot:control.acquire=(operator)); Ctrl-C ends the run", flush=True)
+            signal.signal(signal.SIGTERM, _interrupt)
         summary = run.run()
     finally:
         if trace is not None:
@@ -158,8 +162,13 @@ def _mission(args: argparse.Namespace) -> int:
     return 0 if summary["qualified"] else 1
 
 
-def _print_change(change: Any) -> None:
-    print(f"{change.t:7.1f} s  {change.source} -> {change.dest} ({change.reason})", flush=True)
+def _interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def _print_change(run: Any, change: Any) -> None:
+    t = run.mission_time(change.t)
+    print(f"{t:7.1f} s  {change.source} -> {change.dest} ({change.reason})", flush=True)
 
 
 def _referee(path: str) -> dict[str, Any]:
