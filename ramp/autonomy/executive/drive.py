@@ -32,7 +32,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ramp.autonomy.executive.kit import Kit
-from ramp.autonomy.executive.localize import apply_level, describe, lost
+from ramp.autonomy.executive.localize import apply_level, describe, level_from_floor, lost
 from ramp.autonomy.executive.sensing import (
     DONE,
     FAILED,
@@ -167,6 +167,8 @@ class PlanDriver:
                 self._retried = True
                 if loc.level is not None:
                     apply_level(self.step_, loc.level)
+                else:
+                    level_from_floor(self.step_)
                 self._scans = LevelScans(self.kit)
                 self._scans.start(now)
                 return Status.running()

@@ -8,7 +8,10 @@
   still lost -> `lost`, and the machine's recovery takes over.
 - **Relevel** levels the LIDAR from the scan itself: the level the last lost localization
   reported, or else a fresh scan's, goes to the AHRS (`level_hint`, which corrects the IMU's
-  gravity and so the gimbal's set-point); then the gimbal settles level again.
+  gravity and so the gimbal's set-point); then the gimbal settles level again. When the scan
+  cannot say (the localizer found it tilted but not by how much) and the AHRS claims a lean
+  the arena's floor never gives a standing robot, the floor is taken as level
+  (`level_from_floor`): that is an IMU whose mount shifted.
 - **Rescan** takes fresh level scans (`ctx.localization_scan`).
 - **Relocalize** localizes them with the AHRS yaw and the dead-reckoned pose as priors (no
   pose prior after an operator had the robot: they may have moved it anywhere); lost ->
@@ -17,6 +20,7 @@
 
 from __future__ import annotations
 
+import logging
 import math
 from typing import Any
 
@@ -29,10 +33,18 @@ from ramp.autonomy.executive.sensing import (
     localize_records,
 )
 from ramp.autonomy.executive.step import Step
+from ramp.autonomy.mount import angle_between
+from ramp.autonomy.perception.ahrs import up_in_chassis
 from ramp.autonomy.perception.pipeline import LevelHint, Localization, PoseEstimate
 from ramp.statemachine import Status
 
+log = logging.getLogger("ramp.autonomy.executive")
+
 SENSORS_TIMEOUT_S = 20.0  # the AHRS settles in about 2 s standing still
+#: More lean than this, standing still on the arena's raked floor, is the IMU's error: the
+#: localizer finds the floor tilts a chassis under 5 deg, and the planner keeps the wheels
+#: off rocks and craters. An IMU shift (SPEC 6.2) is 4-8 deg.
+FLOOR_LEAN_DEG = 3.0
 LEVEL_NOTE = "level"  # ctx.notes: the newest LevelHint a lost localization gave
 
 
@@ -63,6 +75,22 @@ def apply_level(step: Step, hint: LevelHint) -> None:
     p = step.kit.perception
     p.ahrs.level_hint(hint.roll, hint.pitch, hint.weight, t=hint.t)
     p.leveller.level(0.0)
+
+
+def level_from_floor(step: Step) -> bool:
+    """When the AHRS says the chassis, standing still, leans more than the arena's floor
+    ever tilts it (`FLOOR_LEAN_DEG`), its gravity is what is wrong (an IMU whose mount
+    shifted, SPEC 6.2): tell it the chassis stands level. The AHRS folds the difference into
+    its mount correction, the gimbal levels on it, and what tilt is left (the floor's degree
+    or so) the localizer's own re-levelling finds. True when it did."""
+    ahrs = step.kit.perception.ahrs
+    lean = math.degrees(angle_between(up_in_chassis(ahrs.roll, ahrs.pitch), (0.0, 0.0, 1.0)))
+    if lean <= FLOOR_LEAN_DEG or step.kit.perception.odometry.moving:
+        return False
+    log.warning("relevel: the AHRS says the chassis leans %.1f deg standing still on the "
+                "arena's floor; taking level as the floor's", lean)
+    apply_level(step, LevelHint(0.0, 0.0, 1.0, None))
+    return True
 
 
 class InitialLocalization(Step):
@@ -117,7 +145,7 @@ class Relevel(Step):
         self.settling_since = now
         if isinstance(hint, LevelHint):
             apply_level(self, hint)
-        else:
+        elif not level_from_floor(self):
             self.scans = LevelScans(self.kit)
             self.scans.start(now)
 
