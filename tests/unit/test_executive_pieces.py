@@ -4,7 +4,8 @@ plans, the plan home's last leg, and the choice of digging spots."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
+from typing import Any
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from ramp.autonomy.config import MISSION_FIELDS, parse_config
 from ramp.autonomy.executive.kit import Kit
 from ramp.autonomy.executive.plan import (
     START_REGION,
+    PlanPathToDig,
     StartPlanners,
     choose_spot,
     plan_home,
@@ -21,13 +23,15 @@ from ramp.autonomy.executive.plan import (
     trim_dock,
 )
 from ramp.autonomy.executive.pose import PoseTracker
+from ramp.autonomy.executive.scan import TIGHT_NOTE, build_map
 from ramp.autonomy.executive.settings import ExecutiveSettings, settings_from
 from ramp.autonomy.odometry import Odometry
+from ramp.autonomy.perception.pipeline import Obstacle
 from ramp.autonomy.planning import ArenaMap, DigSites, Disc, Planner, Pose, plan_to_dock
 from ramp.autonomy.planning.geometry import footprint_clearance
 from ramp.autonomy.planning.path import end_yaw, swept_poses
 from ramp.simulation.campaign import combination
-from ramp.statemachine import MissionContext
+from ramp.statemachine import MissionContext, StatusKind
 
 
 # -- settings ------------------------------------------------------------------------------
@@ -156,3 +160,43 @@ def test_digging_spots_leave_room_to_turn_where_the_robot_arrives_and_leaves() -
         x, y = spot.pose.x, spot.pose.y
         assert planner.can_spin_at(x, y) and planner.can_spin_at(x + sites.config.creep_m, y)
         sites.mark_dug(spot)
+
+
+class _Robot:
+    def begin(self) -> None:
+        pass
+
+    def problem(self) -> None:
+        return None
+
+
+@dataclass
+class _Kit:
+    """What Plan Path reads of the kit: the pose, the detections, the settings."""
+
+    here: Pose
+    log: dict[str, Any]
+    settings: ExecutiveSettings = field(default_factory=ExecutiveSettings)
+    robot: _Robot = field(default_factory=_Robot)
+
+    def pose(self) -> Pose:
+        return self.here
+
+
+def test_a_layout_only_the_detected_discs_let_through_is_planned_on_them_as_detected() -> None:
+    # SPEC 6.1's example world: its one way into the digging region is a 0.92 m gap, too
+    # narrow once every disc is grown by the detector's margin.
+    found = [Obstacle(kind, x, y, d) for kind, x, y, d in (
+        ("rock", 2.10, 0.90, 0.25), ("rock", 3.30, 2.60, 0.12), ("rock", 2.80, 1.70, 0.30),
+        ("crater", 3.90, 1.10, 0.30), ("crater", 2.40, 3.20, 0.20))]
+    ctx = MissionContext()
+    kit = _Kit(Pose(0.8, 3.0, 0.0), {"obstacles": found, "planned": []})
+    build_map(ctx, found, 0.03, 0.10)
+    grown = ctx.planner
+    step = PlanPathToDig(kit)  # type: ignore[arg-type]
+    step.start(ctx, 0.0)
+    status = step.tick(0.0, 0.05)
+    assert status.kind is StatusKind.DONE, status
+    assert ctx.planner is not grown and ctx.notes[TIGHT_NOTE]
+    assert [d.radius for d in ctx.rocks] == pytest.approx([0.125, 0.06, 0.15])
+    assert ctx.plan is not None and ctx.plan.ok and ctx.dig_spot is not None

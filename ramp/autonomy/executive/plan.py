@@ -1,11 +1,14 @@
 """Plan Path (to a digging spot, home to the collector) and the vantage point of the 3D scan.
 
 Both plans come from the planner that Detect Obstacles built (`ctx.planner`: the walls and
-what the sweep found, each disc grown by the detector's error). The way out goes to the
-interrupted spot if there is one (a recovery resumes it), else to the next spot that does
-not repeat (`DigSites.next_spot`, nearest row and cheapest trip from the collector's approach
-first). The way home is `plan_to_dock`: to the longest straight approach in front of the
-collector that is clear, then straight back onto the wall.
+what the sweep found, each disc grown by the detector's error; when no digging spot can be
+reached around the grown discs, once, the discs as detected: the planner keeps its own
+margin, and a layout whose only gap is a few centimetres wider than the robot is driven).
+The way out goes to the interrupted spot if there is one (a recovery resumes it), else to
+the next spot that does not repeat (`choose_spot`: `DigSites`' ranking, nearest row and
+cheapest trip from the collector's approach first, where the robot has room to turn). The
+way home is `plan_to_dock`: to the longest straight approach in front of the collector that
+is clear, then straight back onto the wall.
 
 Before any obstacle is known, the robot moves only inside the start region: the vantage
 point's plan uses an arena that ends at x = 1.5 (`START_REGION`), so no footprint, turning or
@@ -17,12 +20,14 @@ needs.
 
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
 
 from ramp.autonomy import arena
 from ramp.autonomy.executive.kit import Kit, yaw_error
+from ramp.autonomy.executive.scan import TIGHT_NOTE, build_map
 from ramp.autonomy.executive.step import Step
 from ramp.autonomy.planning import (
     ArenaMap,
@@ -37,9 +42,12 @@ from ramp.autonomy.planning import (
 )
 from ramp.statemachine import Status
 
+log = logging.getLogger("ramp.autonomy.executive")
+
 START_REGION = ArenaMap(length=arena.START_END_X_M)
 START_FINE = PlannerConfig(resolution_m=0.025, margin_m=0.06, min_margin_m=0.03)
 DOCK_REFERENCE = (arena.ROBOT_LENGTH_M / 2 + 1.0, arena.COLLECTOR_Y_M)  # the approach
+DIG_REFERENCE = (arena.OBSTACLE_END_X_M + 1.0, arena.COLLECTOR_Y_M)  # inside the dig region
 DOCK_GAP_M = 0.04  # the crossing home stops this short of the wall; Dock does the rest
 VANTAGE_TOLERANCE_M = 0.12  # already this near the vantage point (and facing +x): stay
 VANTAGE_YAW_DEG = 4.0
@@ -125,7 +133,9 @@ def choose_spot(planner: Planner, sites: DigSites, pose: Pose,
     row, cheapest trip) where the robot can turn full circle both where it starts digging and
     where the creep ends, since it arrives there and leaves from there; a spot by a wall is
     entered and left by manoeuvres the follower drives with only centimetres to spare. When
-    none of those can be reached, `DigSites.next_spot`'s choice."""
+    none of those can be reached, `DigSites.next_spot`'s choice; when the grid sees no way
+    into the digging region at all, spots ranked from inside it, for the planner's search
+    over headings to reach through a gap barely wider than the robot."""
     creep = sites.config.creep_m
     for spot in sites.candidates(DOCK_REFERENCE, reachable_from=pose.xy):
         x, y = spot.pose.x, spot.pose.y
@@ -137,7 +147,25 @@ def choose_spot(planner: Planner, sites: DigSites, pose: Pose,
         tries -= 1
         if tries <= 0:
             break
-    return sites.next_spot(pose, reference=DOCK_REFERENCE)
+    fallback, result = sites.next_spot(pose, reference=DOCK_REFERENCE)
+    if fallback is not None:
+        return fallback, result
+    # The grid sees no way into the digging region: a gap barely wider than the robot,
+    # which only the planner's search over headings gets through. Rank the spots from
+    # inside the region instead, and let the planner try.
+    last = result
+    for spot in sites.candidates(DIG_REFERENCE):
+        x, y = spot.pose.x, spot.pose.y
+        if not (planner.can_spin_at(x, y) and planner.can_spin_at(x + creep, y)):
+            continue
+        result = planner.plan(pose, spot.pose.xy, goal_yaw=spot.pose.yaw)
+        if result.ok:
+            return spot, result
+        last = result
+        tries -= 1
+        if tries <= 0:
+            break
+    return None, last
 
 
 class PlanPathToDig(Step):
@@ -155,6 +183,16 @@ class PlanPathToDig(Step):
                 ctx.dig_spot = None
         if ctx.dig_spot is None:
             found, result = choose_spot(ctx.planner, ctx.dig_sites, pose)
+            if found is None and not ctx.notes.get(TIGHT_NOTE) and kit.log["obstacles"]:
+                # A layout whose only way through is narrower than the robot plus the grown
+                # discs: plan on the discs as detected (the planner still keeps its own
+                # margin), rather than give up the run.
+                ctx.notes[TIGHT_NOTE] = True
+                build_map(ctx, kit.log["obstacles"], 0.0, kit.settings.partial_margin_m)
+                assert ctx.planner is not None and ctx.dig_sites is not None
+                log.warning("plan: no way to a digging spot around the grown obstacles; "
+                            "planning on them as detected")
+                found, result = choose_spot(ctx.planner, ctx.dig_sites, pose)
             if found is None:
                 return Status.failed(f"no digging spot: {result.reason}")
             ctx.dig_spot = found

@@ -12,14 +12,36 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from ramp.autonomy.executive.sensing import DONE, FAILED, StopAndGoSweep
 from ramp.autonomy.executive.step import Step
 from ramp.autonomy.perception.cloud import region_distances, sweep_from_config
-from ramp.autonomy.perception.pipeline import PoseEstimate
+from ramp.autonomy.perception.pipeline import Obstacle, PoseEstimate
 from ramp.autonomy.planning import ArenaMap, DigSites, Disc, Planner
-from ramp.statemachine import Status
+from ramp.statemachine import MissionContext, Status
 
 SWEEP_POSE_NOTE = "sweep_pose"  # ctx.notes: the PoseEstimate the sweep was taken from
+
+
+TIGHT_NOTE = "tight_map"  # ctx.notes: the map was rebuilt without the margin (see plan.py)
+
+
+def build_map(ctx: MissionContext, found: Sequence[Obstacle], margin: float,
+              partial_margin: float) -> None:
+    """The planner's map from detected obstacles, each disc grown by `margin` (and by
+    `partial_margin` more when seen only in part); the digging spots on it, keeping the
+    trenches already dug."""
+    rocks: list[Disc] = []
+    craters: list[Disc] = []
+    for o in found:
+        grow = margin + (partial_margin if getattr(o, "partial", False) else 0.0)
+        (rocks if o.kind == "rock" else craters).append(Disc(o.x, o.y, 0.5 * o.d + grow))
+    ctx.rocks, ctx.craters = rocks, craters
+    dug = list(ctx.dig_sites.dug) if ctx.dig_sites is not None else []
+    ctx.planner = Planner(ArenaMap(obstacles=tuple(rocks) + tuple(craters)))
+    ctx.dig_sites = DigSites(ctx.planner)
+    ctx.dig_sites.dug.extend(dug)
 
 
 class ScanForObstacles(Step):
@@ -68,18 +90,9 @@ class DetectObstacles(Step):
         if not records or not isinstance(pose, PoseEstimate):
             return Status.failed("no 3D scan to detect obstacles in")
         found = kit.detect(records, pose)
-        s = kit.settings
-        rocks: list[Disc] = []
-        craters: list[Disc] = []
-        for o in found:
-            grow = s.obstacle_margin_m + (s.partial_margin_m if getattr(o, "partial", False)
-                                          else 0.0)
-            disc = Disc(o.x, o.y, 0.5 * o.d + grow)
-            (rocks if o.kind == "rock" else craters).append(disc)
-        ctx.rocks, ctx.craters = rocks, craters
         kit.log["obstacles"] = list(found)
-        ctx.planner = Planner(ArenaMap(obstacles=tuple(rocks) + tuple(craters)))
-        ctx.dig_sites = DigSites(ctx.planner)
+        build_map(ctx, found, kit.settings.obstacle_margin_m, kit.settings.partial_margin_m)
+        rocks, craters = ctx.rocks, ctx.craters
         listed = ", ".join(f"{o.kind} at ({o.x:.2f}, {o.y:.2f}) d {o.d:.2f}" for o in found)
         return Status.done(f"{len(rocks)} rocks, {len(craters)} craters"
                            + (f": {listed}" if listed else ""))
