@@ -213,3 +213,51 @@ def test_a_bad_world_file_exits_2_naming_its_line(tmp_path: Path,
     assert main(["sim", "mission", "--world", str(world)]) == 2
     err = capsys.readouterr().err
     assert "w.yaml:2: rocks[0].d:" in err
+
+
+class DriveWatch:
+    """Every 0.1 s: is the mission's pose confident, and is any wheel commanded? Stops the
+    run a minute after the IMU's mount shifted."""
+
+    def __init__(self) -> None:
+        self.driving_unsure: list[float] = []  # times a wheel turned with no confident pose
+        self.unsure_since: float | None = None
+        self.shift_at = math.nan
+
+    def started(self, run: MissionRun) -> None:
+        assert run.rig is not None
+        self.shift_at = run.rig.imu_emulator.fault_info()["at_s"]
+
+    def sampled(self, run: MissionRun, now: float) -> None:
+        assert run.autonomy is not None
+        mission = run.autonomy.mission
+        moving = any(run.world.duty(f"base.{w}_wheel") != 0.0 for w in ("lf", "lb", "rf",
+                                                                        "rb"))
+        sure = mission.pose_confident()
+        if sure:
+            self.unsure_since = None
+        elif self.unsure_since is None:
+            self.unsure_since = now
+        # one mission tick (0.05 s) plus the stop's way to the wheels may pass first
+        if moving and self.unsure_since is not None and now - self.unsure_since > 0.25:
+            self.driving_unsure.append(run.mission_time(now))
+        if run.mission_time(now) > self.shift_at + 60.0:
+            run.request_stop()
+
+
+@pytest.mark.timeout(180)
+def test_an_imu_shift_while_driving_is_levelled_out_and_never_driven_through_blind() -> None:
+    box, heading = combination(0)
+    run = MissionRun(MissionOptions(seed=0, start_box=box, heading=heading, fault="imu-shift",
+                                    duration=600.0))
+    watch = DriveWatch()
+    run.observers.append(watch)
+    summary = run.run()
+    assert 60.0 <= watch.shift_at <= 540.0
+    assert run.mission_time(run.ended_at) > watch.shift_at + 60.0
+    assert watch.driving_unsure == []
+    assert summary["collisions"] == 0 and summary["crater_entries"] == 0
+    assert run.autonomy is not None
+    ahrs = run.autonomy.kit.perception.ahrs
+    assert ahrs.correction_deg > 3.0  # the shift found its way into the mount correction
+    assert run.autonomy.mission.state not in ("waiting_for_operator", "paused")

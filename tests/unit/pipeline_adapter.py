@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -52,3 +53,16 @@ def localize(records: Sequence[ScanRecord], *, hint: str | None = None,
 def detect(records: Sequence[ScanRecord], pose: PoseEstimate) -> list[Obstacle]:
     found = detect_obstacles(merge(records, pose.x, pose.y, pose.yaw)).obstacles
     return list(found)  # type: ignore[arg-type]
+
+
+def run_mission(seed: int, start_box: str, heading: int, fault: str = "none",
+                duration: float = 600.0) -> dict[str, Any]:
+    """`ramp.simulation.mission.run_mission` with the two calls above behind the pipeline,
+    for `ramp sim campaign --mission tests.unit.pipeline_adapter:run_mission` (each worker
+    process wires its own)."""
+    from ramp.autonomy.perception import pipeline
+    from ramp.simulation.mission import run_mission as run
+
+    pipeline.localize = localize
+    pipeline.detect_obstacles = detect
+    return run(seed, start_box, heading, fault, duration)
