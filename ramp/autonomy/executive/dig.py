@@ -72,15 +72,26 @@ class Excavate(Step):
             return Status.failed(f"no regolith came in after {digging_s:.0f} s of digging")
         return Status.running()
 
+    def end(self) -> None:
+        # Left before the target (the run's end sent it home, a fault, an operator): a spot
+        # that gave regolith has its trench now, and is not dug again.
+        if self.phase == "digging" and self.kit.robot.load_kg - self.load0 >= 1.0:
+            self._mark_dug()
+
     def _finish(self, load: float, digging_s: float) -> Status:
-        ctx, robot = self.ctx, self.kit.robot
+        robot = self.kit.robot
         robot.send("ble:ble.stop=()")  # the chain, and the lift's hold: nothing left armed
         robot.halt_base()
         robot.moving = False
+        self._mark_dug()
+        return Status.done(f"{load:.1f} kg in the bin after {digging_s:.0f} s of digging")
+
+    def _mark_dug(self) -> None:
+        ctx = self.ctx
         spot = ctx.dig_spot
         if spot is not None:
             if ctx.dig_sites is not None:
                 ctx.dig_sites.mark_dug(spot, max(0.0, self.crept))
             ctx.dig_spots_done.append(spot)
             ctx.dig_spot = None
-        return Status.done(f"{load:.1f} kg in the bin after {digging_s:.0f} s of digging")
+        self.phase = "dug"
