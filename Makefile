@@ -39,6 +39,7 @@ campaign: $(STAMP)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check ramp firmware_like tests bench
 	$(VENV)/bin/mypy
+	$(VENV)/bin/lint-imports
 
 test: lint
 	$(PY) -m pytest
@@ -53,7 +54,7 @@ fuzz: $(STAMP)
 	RAMP_FUZZ_EXAMPLES=20000 $(PY) -m pytest tests/fuzz -q
 
 clean:
-	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis .import_linter_cache
 
 # Refresh the README's console screenshot: the browser tests take it (docs/img/teleop.png).
 screenshots: $(STAMP)

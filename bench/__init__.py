@@ -19,6 +19,7 @@ AUTONOMY_SECTIONS: tuple[str, ...] = (
         "rig",
         "obstacles",
         "localizer",
+        "perception",
         "mission",
     )
     if find_spec("ramp.autonomy") is not None else ())

@@ -1,14 +1,13 @@
 """Processes the benchmarks start: `python -m bench.child NAME ...`.
 
-- `supervisor`: exactly `ramp run --sim` (it calls `ramp.cli.main`), plus two observation
-  hooks installed from outside, so no file in ramp/ changes: the scheduler's `TickStats` is
-  replaced by a subclass that also keeps every lateness sample with its time, and the
-  Supervisor by a subclass that copies each driver's `stats` just before shutdown. Both are
-  written to `--dump` as JSON when the process exits (after SIGTERM).
+- `supervisor`: exactly `ramp run --sim` (it calls `ramp.cli.main`; `--real` leaves out
+  `--sim`) with an observer (`ramp.runtime.Observer`) that keeps every tick's lateness with
+  its time and, at shutdown, each driver's `stats` and each task's cost; all of it is written
+  to `--dump` as JSON when the process exits (after SIGTERM).
 - `select-loop`: the tick baseline, a bare absolute-deadline loop waiting in `select.select`,
   run beside the supervisor until told to stop.
-- `echo`: the round-trip baseline, a minimal `selectors` server answering every line with a
-  fixed response of the supervisor's size.
+- `bare-server`: the round-trip baseline, a minimal `select.select` server answering every
+  line with a fixed response of the supervisor's size.
 - `relay`: the wire baseline, a minimal TCP-line to Sabertooth-packet relay with a watchdog,
   writing through pyserial to the same pty the supervisor's driver would use.
 """
@@ -20,7 +19,6 @@ import json
 import math
 import re
 import select
-import selectors
 import signal
 import socket
 import sys
@@ -31,38 +29,46 @@ from pathlib import Path
 
 # -- supervisor ---------------------------------------------------------------------------------
 def supervisor(args: argparse.Namespace) -> int:
+    """`ramp run --sim` (through `ramp.cli.main`), watched by an observer: the runtime's own
+    hook points (`ramp.runtime.observers`), nothing replaced from outside."""
     import ramp.cli
-    import ramp.scheduler
-    import ramp.supervisor
+    from ramp.runtime import Observer, Supervisor
 
     samples: list[tuple[float, float, int]] = []
-    bus_stats: dict[str, dict[str, int]] = {}
+    busy: list[tuple[float, float]] = []
+    at_exit: dict[str, object] = {}
 
-    class RecordingTickStats(ramp.scheduler.TickStats):
-        """Keeps (time, lateness µs, overruns so far) of every tick, not just a window."""
+    class BenchObserver(Observer):
+        """Every tick's lateness and cost with its time; at shutdown, the drivers' counters
+        and what each task cost (neither is exposed over MCP)."""
 
-        def record(self, late_s: float) -> None:
-            samples.append((time.monotonic(), late_s * 1e6, self.overruns))
-            super().record(late_s)
+        sup: Supervisor | None = None
 
-    class ObservedSupervisor(ramp.supervisor.Supervisor):
-        """Copies the drivers' counters before shutdown (they are not exposed over MCP)."""
+        def started(self, supervisor: Supervisor) -> None:
+            self.sup = supervisor
 
-        def shutdown(self) -> None:
-            for name, bus in self.buses.items():
-                stats = getattr(bus, "stats", None)
-                if isinstance(stats, dict):
-                    bus_stats[name] = dict(stats)
-            super().shutdown()
+        def tick(self, t: float, late_s: float) -> None:
+            overruns = self.sup.scheduler.stats.overruns if self.sup is not None else 0
+            samples.append((time.monotonic(), late_s * 1e6, overruns))
 
-    # Both names are looked up when the objects are built, so the hooks are in place for the
-    # unchanged `ramp run` code path below.
-    ramp.scheduler.TickStats = RecordingTickStats  # type: ignore[misc]
-    ramp.supervisor.Supervisor = ObservedSupervisor  # type: ignore[misc]
-    code = ramp.cli.main(["run", "--config", args.config, "--sim", "--host", "127.0.0.1",
-                          "--port", "0", "--log-level", args.log_level])
-    Path(args.dump).write_text(json.dumps({"exit": code, "samples": samples,
-                                           "bus_stats": bus_stats}))
+        def tick_done(self, t: float, busy_s: float) -> None:
+            busy.append((time.monotonic(), busy_s * 1e6))
+
+        def stopping(self, supervisor: Supervisor) -> None:
+            at_exit["bus_stats"] = {name: dict(bus.stats) for name, bus in
+                                    supervisor.buses.items()
+                                    if isinstance(getattr(bus, "stats", None), dict)}
+            at_exit["tasks"] = {t.name: {"runs": t.runs, "total_s": t.total_s, "max_s": t.max_s}
+                                for t in supervisor.scheduler.tasks}
+            at_exit["ticks"] = supervisor.scheduler.stats.ticks
+
+    argv = ["run", "--config", args.config, "--host", "127.0.0.1", "--port", "0",
+            "--log-level", args.log_level]
+    if not args.real:
+        argv.append("--sim")
+    code = ramp.cli.main(argv, observer=BenchObserver())
+    Path(args.dump).write_text(json.dumps({"exit": code, "samples": samples, "busy": busy,
+                                           **at_exit}))
     return code
 
 
@@ -100,18 +106,20 @@ def select_loop(args: argparse.Namespace) -> int:
     return 0
 
 
-# -- echo (round-trip baseline) -----------------------------------------------------------------
-def echo(args: argparse.Namespace) -> int:
-    """Each complete line in is answered by one fixed line of `--size` bytes (with `\\n`)."""
+# -- bare server (round-trip baseline) ----------------------------------------------------------
+def bare_server(args: argparse.Namespace) -> int:
+    """Each complete line in is answered by one fixed line of `--size` bytes (with `\\n`).
+
+    The least a Python line server can do: one `select.select` over its sockets, `recv`,
+    count newlines, `send`. No parsing, no routing, no formatting, so the ratio against it is
+    what RAMP's own work costs per request."""
     answer = b"x" * (args.size - 1) + b"\n"
-    sel = selectors.DefaultSelector()
     server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     server.bind(("127.0.0.1", 0))
     server.listen(64)
     server.setblocking(False)
-    sel.register(server, selectors.EVENT_READ)
-    pending: dict[socket.socket, bytearray] = {}
+    out: dict[socket.socket, bytearray] = {}
     stop = False
 
     def on_term(signum: int, frame: object) -> None:
@@ -122,26 +130,16 @@ def echo(args: argparse.Namespace) -> int:
     print(f"ready on 127.0.0.1:{server.getsockname()[1]}", flush=True)
 
     def drop(sock: socket.socket) -> None:
-        sel.unregister(sock)
-        pending.pop(sock, None)
+        out.pop(sock, None)
         sock.close()
 
-    def flush(sock: socket.socket) -> None:
-        out = pending[sock]
-        try:
-            n = sock.send(out)
-        except BlockingIOError:
-            n = 0
-        except OSError:
-            drop(sock)
-            return
-        del out[:n]
-        sel.modify(sock, selectors.EVENT_READ | (selectors.EVENT_WRITE if out else 0))
-
     while not stop:
-        for key, events in sel.select(0.5):
-            sock = key.fileobj
-            assert isinstance(sock, socket.socket)
+        waiting = [s for s, buf in out.items() if buf]
+        try:
+            readable, writable, _ = select.select([server, *out], waiting, [], 0.5)
+        except InterruptedError:
+            continue
+        for sock in readable:
             if sock is server:
                 try:
                     conn, _ = server.accept()
@@ -149,22 +147,31 @@ def echo(args: argparse.Namespace) -> int:
                     continue
                 conn.setblocking(False)
                 conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                pending[conn] = bytearray()
-                sel.register(conn, selectors.EVENT_READ)
+                out[conn] = bytearray()
                 continue
-            if events & selectors.EVENT_READ:
-                try:
-                    data = sock.recv(65536)
-                except BlockingIOError:
-                    continue
-                except OSError:
-                    data = b""
-                if not data:
-                    drop(sock)
-                    continue
-                pending[sock] += answer * data.count(b"\n")
-            if sock in pending:
-                flush(sock)
+            try:
+                data = sock.recv(65536)
+            except BlockingIOError:
+                continue
+            except OSError:
+                data = b""
+            if not data:
+                drop(sock)
+                continue
+            out[sock] += answer * data.count(b"\n")
+            writable.append(sock)
+        for sock in writable:
+            buf = out.get(sock)
+            if not buf:
+                continue
+            try:
+                n = sock.send(buf)
+            except BlockingIOError:
+                continue
+            except OSError:
+                drop(sock)
+                continue
+            del buf[:n]
     return 0
 
 
@@ -276,13 +283,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--config", required=True)
     p.add_argument("--dump", required=True)
     p.add_argument("--log-level", default="warning")
+    p.add_argument("--real", action="store_true", help="real drivers: no --sim")
     p.set_defaults(func=supervisor)
     p = sub.add_parser("select-loop")
     p.add_argument("--rate", type=float, required=True)
     p.set_defaults(func=select_loop)
-    p = sub.add_parser("echo")
+    p = sub.add_parser("bare-server")
     p.add_argument("--size", type=int, required=True)
-    p.set_defaults(func=echo)
+    p.set_defaults(func=bare_server)
     p = sub.add_parser("relay")
     p.add_argument("--port", required=True)
     p.add_argument("--baud", type=int, default=9600)

@@ -21,7 +21,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -60,6 +60,8 @@ class Settings:
     wd_timeout_s: float | None  # None: the timeout in ramp.yaml
     startup_runs: int
     rss_after_s: float
+    #: Round trips: trials of each figure, interleaved with the baseline; the median is kept.
+    rt_trials: int = 3
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -67,14 +69,14 @@ class Settings:
 
 PROFILES = {
     "full": Settings("full", 60.0, 4, 50.0, 10_000, 500, (1, 4, 8), 16, 3.0,
-                     500, 1000.0, 5.0, 10, None, 7, 60.0),
+                     500, 1000.0, 5.0, 10, None, 7, 60.0, 3),
     "quick": Settings("quick", 5.0, 4, 50.0, 1_000, 100, (1, 4, 8), 16, 1.0,
-                      100, 1000.0, 1.0, 3, None, 3, 5.0),
+                      100, 1000.0, 1.0, 3, None, 3, 5.0, 3),
     # Minimal settings for tests/unit/test_bench_smoke.py: proves the code runs, not the figures.
     # The watchdog timeout keeps 10 heartbeat periods of margin: at 0.2 s a loaded machine
     # delayed a heartbeat enough to trip the watchdog (or the relay's) while still driving.
     "smoke": Settings("smoke", 0.4, 4, 50.0, 100, 10, (1, 4, 8), 16, 0.2,
-                      8, 1000.0, 0.2, 1, 0.5, 1, 0.2),
+                      8, 1000.0, 0.2, 1, 0.5, 1, 0.2, 1),
 }
 
 
@@ -148,14 +150,18 @@ class Child:
     """A process we started: line protocol on its stdout, stderr into a log file."""
 
     def __init__(self, name: str, argv: Sequence[str], workdir: Path,
-                 stdin: bool = False) -> None:
+                 stdin: bool = False, cpu: int | None = None,
+                 env: dict[str, str] | None = None) -> None:
         self.name = name
         self.log_path = workdir / f"{name}-{len(_CHILDREN)}.log"
         self._log = open(self.log_path, "wb")  # noqa: SIM115 - closed in wait()/kill()
         self.started_at = time.monotonic()
         self.proc = subprocess.Popen(
             list(argv), cwd=REPO, stdout=subprocess.PIPE, stderr=self._log,
-            stdin=subprocess.PIPE if stdin else subprocess.DEVNULL)
+            stdin=subprocess.PIPE if stdin else subprocess.DEVNULL,
+            env=None if env is None else {**os.environ, **env},
+            # Pinned before exec, so every thread the child starts inherits the core.
+            preexec_fn=None if cpu is None else functools.partial(os.sched_setaffinity, 0, {cpu}))
         _CHILDREN.append(self)
         assert self.proc.stdout is not None
         self._fd = self.proc.stdout.fileno()
@@ -261,21 +267,54 @@ def kill_all() -> None:
 atexit.register(kill_all)
 
 
-def start_supervisor(name: str, config: Path, workdir: Path,
-                     timeout: float = 30.0) -> tuple[Child, int, Path]:
-    """The supervisor as `ramp run --sim`, with the bench's observation hooks (bench.child).
+def start_supervisor(name: str, config: Path, workdir: Path, timeout: float = 30.0,
+                     cpu: int | None = None, real: bool = False,
+                     env: dict[str, str] | None = None) -> tuple[Child, int, Path]:
+    """The supervisor as `ramp run --sim` (`real`: without `--sim`), watched by the bench's
+    observer (bench.child).
 
-    Returns the child, its MCP port and the file it writes its tick samples and driver
-    statistics to when it exits."""
+    Returns the child, its MCP port and the file it writes its tick samples, task costs and
+    driver statistics to when it exits."""
     dump = workdir / f"{name}-{len(_CHILDREN)}.json"
     child = Child(name, [PYTHON, "-m", "bench.child", "supervisor", "--config", str(config),
-                         "--dump", str(dump)], workdir)
+                         "--dump", str(dump), *(["--real"] if real else [])], workdir,
+                  cpu=cpu, env=env)
     try:
         m = child.expect(r"ramp: ready on ([\d.]+):(\d+)", timeout)
     except BaseException:
         child.kill()
         raise
     return child, int(m.group(2)), dump
+
+
+def bench_cpu() -> int:
+    """The core the round-trip figures pin client and servers to (the last one usable), as a
+    probe running `taskset -c N` on every process would."""
+    return max(os.sched_getaffinity(0))
+
+
+@contextlib.contextmanager
+def pinned(cpu: int) -> Iterator[None]:
+    """This process (the benchmark's client) on `cpu` for the duration."""
+    before = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, {cpu})
+    try:
+        yield
+    finally:
+        os.sched_setaffinity(0, before)
+
+
+def median_of(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Per key, the median of the runs' values (numbers; other values from the first run)."""
+    out: dict[str, Any] = {}
+    for key, first in runs[0].items():
+        values = [r[key] for r in runs if isinstance(r.get(key), int | float)]
+        if isinstance(first, int | float) and not isinstance(first, bool) and values:
+            mid = sorted(values)[len(values) // 2]
+            out[key] = mid
+        else:
+            out[key] = first
+    return out
 
 
 # -- configs ------------------------------------------------------------------------------------
@@ -285,13 +324,17 @@ def load_marte() -> dict[str, Any]:
 
 
 def write_config(workdir: Path, name: str, *, base_port: str | None = None,
-                 watchdog_timeout: float | None = None) -> Path:
-    """ramp.yaml served on 127.0.0.1:0; `base_port` makes base_motors a real driver on it."""
+                 watchdog_timeout: float | None = None,
+                 ports: dict[str, str] | None = None) -> Path:
+    """ramp.yaml served on 127.0.0.1:0; `base_port` makes base_motors a real driver on it
+    (under --sim); `ports` moves buses to other ports (bus name -> port)."""
     data = load_marte()
     data["server"]["host"] = "127.0.0.1"
     data["server"]["port"] = 0
     if base_port is not None:
         data["buses"]["base_motors"].update(port=base_port, sim=False)
+    for bus, port in (ports or {}).items():
+        data["buses"][bus]["port"] = port
     if watchdog_timeout is not None:
         data["watchdog"]["timeout"] = watchdog_timeout
     path = workdir / f"{name}.yaml"

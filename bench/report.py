@@ -47,19 +47,37 @@ def render(doc: dict[str, Any]) -> str:
     if t and "error" not in t:
         out += [f"**tick** ({t['rate_hz']:g} Hz, {t['duration_s']:g} s each; baseline: bare "
                 "select loop running beside it)", "", HEAD]
-        for run in ("idle", "loaded"):
-            r = t[run]
-            label = "idle" if run == "idle" else "4 clients polling"
+        labels = {"idle": "idle", "loaded": "4 clients polling",
+                  "real_drivers_idle": "real drivers, idle"}
+        for run, label in labels.items():
+            r = t.get(run)
+            if r is None:
+                continue
             out += _pcts(f"{label}: lateness", r["late_us"], " µs")
             out += [_row(f"{label}: overruns", r["overruns"]),
                     _row(f"{label}: CPU % of a core", r["cpu_pct"])]
+            if "tick_busy_us" in r:
+                out += _pcts(f"{label}: tick cost", r["tick_busy_us"], " µs",
+                             ("p50", "p99", "mean"))
         rtt = t["loaded"]["load"]["rtt_us"]
         out += ["", f"Polling clients' round trip (base.get + ble.get): p50 {_num(rtt['p50'])} "
-                f"µs, p99 {_num(rtt['p99'])} µs, max {_num(rtt['max'])} µs.", ""]
+                f"µs, p99 {_num(rtt['p99'])} µs, max {_num(rtt['max'])} µs. A tick's cost is "
+                "what its tasks take, timed by the loop; its baseline is what one iteration "
+                "of the bare loop costs the machine (its CPU over its iterations).",
+                ""]
+        tasks = t["idle"].get("tasks")
+        if tasks:
+            out += ["Tasks of an idle tick (`ramp run --sim`, mean / max per run):", "",
+                    "| task | runs | mean | max |", "|---|---|---|---|"]
+            out += [f"| {name} | {v['runs']:,} | {_num(v['mean_us'])} µs | "
+                    f"{_num(v['max_us'])} µs |" for name, v in tasks.items()]
+            out.append("")
     r = doc.get("round_trip")
     if r and "error" not in r:
         out += [f"**round_trip** (`{r['request']}`, {r['response_bytes']}-byte answer; "
-                "baseline: minimal selectors server answering the same size)", "", HEAD]
+                "baseline: bare select server answering the same size; client and servers "
+                f"pinned to core {r.get('pinned_cpu', '?')}, median of "
+                f"{r.get('trials', 1)} trials)", "", HEAD]
         out += _pcts(f"sequential ×{r['sequential']['requests']:,}: RTT", r["sequential"]["rtt_us"],
                      " µs")
         pip = r["pipelined"]
@@ -236,6 +254,23 @@ def render(doc: dict[str, Any]) -> str:
                 f"position error {acc['worst_position_cm']} cm, worst diameter error "
                 f"{acc['worst_diameter_cm']} cm, {acc['false_per_layout']} false obstacles "
                 "per layout.", ""]
+    pc = doc.get("perception")
+    if pc and "error" not in pc:
+        f = pc["flow"]
+        out += [f"**perception** (the integrated chain on the rig, {pc['layouts']} layouts from "
+                "the start region facing the obstacle region; baselines: a least-squares line "
+                "through the fused scan, `world.step` alone for the sweep's simulated time, a "
+                "least-squares plane through the sweep's cloud)", "", HEAD]
+        out += _pcts("one localization (10 scans fused)", pc["localize_ms"], " ms",
+                     ("p50", "max"))
+        out += _pcts(f"one 3D scan ({pc['sweep_scans']} tilts), CPU with the simulator",
+                     pc["sweep"]["cpu_s"], " s", ("p50", "max"))
+        out += _pcts(f"merge + detection ({pc['cloud_points']:,} points)", pc["detect_ms"],
+                     " ms", ("p50", "max"))
+        out += ["", f"The sweep takes {pc['sweep']['simulated_s']['p50']} s of gimbal and "
+                f"LIDAR time; one whole `ramp sim perceive` flow is {f['simulated_s']} "
+                f"simulated s for {f['cpu_s']} s of CPU, of which the localizer "
+                f"{f['localize_cpu_s']} s and the detector {f['detect_cpu_s']} s.", ""]
     return "\n".join(out)
 
 

@@ -1,10 +1,16 @@
 """`round_trip`: `base:base.get=()` over MCP, one at a time and pipelined.
 
 The supervisor is `ramp run --sim` with the MARTE configuration. The baseline, measured in
-the same run with the same client code, is a minimal Python `selectors` server that answers
-each line with a line of the same size as base.get's response, so the ratio is what RAMP's
-parsing, routing, get collection and formatting cost over moving the bytes. The supervisor's
-own tick lateness during each pipelined phase comes from its lateness samples.
+the same run with the same client code, is a bare `select.select` server that answers each
+line with a line of the same size as base.get's response, so the ratio is what RAMP's
+parsing, routing, get collection and formatting cost over moving the bytes.
+
+Both servers and this process (the client) are pinned to one core, as a probe running every
+process under `taskset -c N` would: the client then waits in `recv` while the server runs,
+and no figure includes waking another core (about 50 µs per hop on this VM). Each figure is
+measured `rt_trials` times, RAMP and baseline alternating, and the median trial is reported,
+so a neighbour's burst hits one trial of one side, not the figure. The supervisor's own tick
+lateness during each pipelined phase comes from its lateness samples.
 """
 
 from __future__ import annotations
@@ -21,8 +27,11 @@ from bench.common import (
     PYTHON,
     Child,
     Settings,
+    bench_cpu,
     compare,
     connect,
+    median_of,
+    pinned,
     progress,
     recv_line,
     start_supervisor,
@@ -116,44 +125,71 @@ def pipelined(port: int, clients: int, in_flight: int, duration: float) -> dict[
             "window": (count_from, t_end)}
 
 
-def measure(port: int, settings: Settings, label: str) -> dict[str, Any]:
-    progress(f"round_trip: {label}: {settings.rt_requests} sequential requests")
-    out: dict[str, Any] = {"sequential_rtt_us": summary(
-        sequential(port, settings.rt_requests, settings.rt_warmup))}
+def measure(ports: dict[str, int], settings: Settings) -> dict[str, dict[str, Any]]:
+    """Every figure for each server, trials alternating between them; medians per figure."""
+    seq: dict[str, list[dict[str, Any]]] = {name: [] for name in ports}
+    piped: dict[str, dict[int, list[dict[str, Any]]]] = {
+        name: {n: [] for n in settings.tp_clients} for name in ports}
+    for trial in range(settings.rt_trials):
+        for name, port in ports.items():
+            progress(f"round_trip: {name}, trial {trial + 1}/{settings.rt_trials}: "
+                     f"{settings.rt_requests} sequential requests")
+            seq[name].append(summary(sequential(port, settings.rt_requests,
+                                                settings.rt_warmup)))
     for n in settings.tp_clients:
-        progress(f"round_trip: {label}: {n} clients x {settings.tp_in_flight} in flight, "
-                 f"{settings.tp_duration_s:g} s")
-        out[f"clients_{n}"] = pipelined(port, n, settings.tp_in_flight, settings.tp_duration_s)
-        time.sleep(0.1)  # let the server see the previous clients' close
+        for trial in range(settings.rt_trials):
+            for name, port in ports.items():
+                progress(f"round_trip: {name}, trial {trial + 1}/{settings.rt_trials}: "
+                         f"{n} clients x {settings.tp_in_flight} in flight, "
+                         f"{settings.tp_duration_s:g} s")
+                piped[name][n].append(pipelined(port, n, settings.tp_in_flight,
+                                                settings.tp_duration_s))
+                time.sleep(0.1)  # let the server see the previous clients' close
+    out: dict[str, dict[str, Any]] = {}
+    for name in ports:
+        figs: dict[str, Any] = {"sequential_rtt_us": median_of(seq[name])}
+        for n, runs in piped[name].items():
+            by_rate = sorted(runs, key=lambda r: r["req_per_s"])
+            middle = by_rate[len(by_rate) // 2]
+            figs[f"clients_{n}"] = {
+                "req_per_s": middle["req_per_s"],
+                "latency_us": median_of([r["latency_us"] for r in runs]),
+                "windows": [r["window"] for r in runs],
+                "trials_req_per_s": [r["req_per_s"] for r in runs],
+            }
+        out[name] = figs
     return out
 
 
 def run(settings: Settings, workdir: Path) -> dict[str, Any]:
+    cpu = bench_cpu()
     config = write_config(workdir, "round_trip")
-    child, port, dump = start_supervisor("round_trip", config, workdir)
+    child, port, dump = start_supervisor("round_trip", config, workdir, cpu=cpu)
+    bare: Child | None = None
     try:
         with connect(port) as sock:
             sock.sendall(REQUEST)
             response_bytes = len(recv_line(sock))
-        ramp = measure(port, settings, "supervisor")
+        bare = Child("bare-server", [PYTHON, "-m", "bench.child", "bare-server", "--size",
+                                     str(response_bytes)], workdir, cpu=cpu)
+        m = bare.expect(r"ready on [\d.]+:(\d+)", 30)
+        with pinned(cpu):
+            figs = measure({"supervisor": port, "baseline": int(m.group(1))}, settings)
         child.terminate()
+        bare.terminate()
     finally:
         child.kill()
+        if bare is not None:
+            bare.kill()
     samples = json.loads(dump.read_text())["samples"]
-
-    echo = Child("echo", [PYTHON, "-m", "bench.child", "echo", "--size", str(response_bytes)],
-                 workdir)
-    try:
-        m = echo.expect(r"ready on [\d.]+:(\d+)", 30)
-        base = measure(int(m.group(1)), settings, "baseline echo server")
-        echo.terminate()
-    finally:
-        echo.kill()
+    ramp, base = figs["supervisor"], figs["baseline"]
 
     out: dict[str, Any] = {
         "request": REQUEST.decode().strip(),
         "response_bytes": response_bytes,
-        "baseline": {"what": "minimal Python selectors line server answering each line with "
+        "pinned_cpu": cpu,
+        "trials": settings.rt_trials,
+        "baseline": {"what": "bare select.select line server answering each line with "
                              f"{response_bytes} bytes",
                      "sequential_rtt_us": base["sequential_rtt_us"]},
         "sequential": {"requests": settings.rt_requests,
@@ -163,9 +199,16 @@ def run(settings: Settings, workdir: Path) -> dict[str, Any]:
     }
     for n in settings.tp_clients:
         fig, ref = ramp[f"clients_{n}"], base[f"clients_{n}"]
-        late, overruns = window(samples, *fig["window"])
+        late: list[float] = []
+        overruns = 0
+        for window_ in fig["windows"]:
+            got, over = window(samples, *window_)
+            late += got
+            overruns += over
         out["pipelined"][f"clients_{n}"] = {
             "req_per_s": compare(fig["req_per_s"], ref["req_per_s"]),
+            "trials_req_per_s": {"value": fig["trials_req_per_s"],
+                                 "baseline": ref["trials_req_per_s"]},
             "latency_us": {k: compare(fig["latency_us"][k], ref["latency_us"][k])
                            for k in ("p50", "p99", "max")},
             # How the supervisor's own ticks fared while it was saturated.

@@ -1,8 +1,12 @@
-"""`tick`: how late the supervisor's ticks start, idle and while MCP clients poll it.
+"""`tick`: how late the supervisor's ticks start, what one costs, and the CPU it takes.
 
 The MARTE configuration runs as a real `ramp run --sim` process on the wall clock (through
-`bench.child supervisor`, which keeps every lateness sample; `robot.get` only has p50/p99/max
-over a window). Lateness is wake time minus the absolute deadline, as in
+`bench.child supervisor`, whose observer keeps every lateness sample and each task's cost;
+`robot.get` only has p50/p99/max over a window), idle and while MCP clients poll it; and
+idle as `ramp run` on real drivers: the Sabertooth driver on ptys served by emulator
+processes, the Phidget driver on a stand-in of the vendor library
+(`bench/fake_phidget22`, whose own thread delivers samples as libphidget22's does).
+Lateness is wake time minus the absolute deadline, as in
 shared/reference/platform-limits.md. The baseline is a bare absolute-deadline loop waiting in
 `select.select` with a microsecond timeout, doing nothing, at the same rate for the same time
 in its own process, run *at the same time* as each supervisor run and cut to the same
@@ -21,6 +25,7 @@ from typing import Any
 
 from bench.common import (
     PYTHON,
+    REPO,
     Child,
     Settings,
     compare,
@@ -109,13 +114,27 @@ def poll(port: int, clients: int, hz: float, duration: float) -> list[float]:
     return rtt_us
 
 
+def tick_cost(data: dict[str, Any]) -> dict[str, Any]:
+    """What the tasks of one tick cost (the scheduler times each task): mean per tick, and per
+    task its mean and max per run."""
+    ticks = max(1, int(data.get("ticks", 0)))
+    tasks = data.get("tasks", {})
+    per_task = {name: {"mean_us": round(1e6 * t["total_s"] / max(1, t["runs"]), 1),
+                       "max_us": round(1e6 * t["max_s"], 1), "runs": t["runs"]}
+                for name, t in tasks.items()}
+    total = sum(t["total_s"] for t in tasks.values())
+    return {"mean_us_per_tick": round(1e6 * total / ticks, 1), "ticks": ticks,
+            "tasks": per_task}
+
+
 def supervised(config: Path, workdir: Path, duration: float, rate: float,
-               settings: Settings | None) -> dict[str, Any]:
+               settings: Settings | None, real: bool = False,
+               env: dict[str, str] | None = None) -> dict[str, Any]:
     """One run of the supervisor (idle when `settings` is None, else under the poll load),
     with the baseline loop measured over the same window."""
     base = BaselineLoop(rate, workdir)
     try:
-        child, port, dump = start_supervisor("tick", config, workdir)
+        child, port, dump = start_supervisor("tick", config, workdir, real=real, env=env)
         try:
             t0 = time.monotonic()
             cpu0, bcpu0 = child.cpu_seconds(), base.child.cpu_seconds()
@@ -136,10 +155,18 @@ def supervised(config: Path, workdir: Path, duration: float, rate: float,
     data = json.loads(dump.read_text())
     late, overruns = window(data["samples"], t0, t1)
     cpu = round(100 * (cpu1 - cpu0) / (t1 - t0), 2)
+    cost = tick_cost(data)
+    busy = summary(s[1] for s in data.get("busy", []) if t0 <= s[0] <= t1)
+    per_iteration = round(ref["cpu_pct"] / 100 / rate * 1e6, 1)
     out: dict[str, Any] = {
         "late_us": versus(summary(late), ref["late_us"]),
         "overruns": compare(overruns, ref["overruns"]),
         "cpu_pct": compare(cpu, ref["cpu_pct"]),
+        # What a tick takes (its tasks and their bookkeeping, timed by the loop) beside what
+        # one iteration of the bare loop costs the machine (its CPU over its iterations).
+        "tick_busy_us": {k: compare(busy[k], per_iteration) for k in ("p50", "p99", "mean")},
+        "tick_cost_us": compare(cost["mean_us_per_tick"], per_iteration),
+        "tasks": cost["tasks"],
         "ticks": len(late),
         "expected_ticks": int(round((t1 - t0) * rate)),
         "baseline_late_us": ref["late_us"],
@@ -156,6 +183,29 @@ def supervised(config: Path, workdir: Path, duration: float, rate: float,
     return out
 
 
+def real_drivers(workdir: Path, duration: float, rate: float) -> dict[str, Any]:
+    """Idle on real drivers: each Sabertooth bus on the pty of an emulator process, the
+    Phidget boards through the vendor-library stand-in."""
+    emulators: list[Child] = []
+    try:
+        ports = {}
+        for bus, addresses in (("base_motors", "128,129"), ("ble_motors", "130,131")):
+            where = workdir / bus
+            where.mkdir(exist_ok=True)
+            emu = Child(f"sabertooth-{bus}", [PYTHON, "-m", "firmware_like.sabertooth",
+                                              "--addresses", addresses, "--paced", "--quiet",
+                                              "--dir", str(where)], workdir)
+            emulators.append(emu)
+            ports[bus] = emu.expect(r"sabertooth emulator on (\S+)", 30).group(1)
+        config = write_config(workdir, "tick-real", ports=ports)
+        fake = str(REPO / "bench" / "fake_phidget22")
+        return supervised(config, workdir, duration, rate, None, real=True,
+                          env={"PYTHONPATH": fake})
+    finally:
+        for emu in emulators:
+            emu.kill()
+
+
 def run(settings: Settings, workdir: Path) -> dict[str, Any]:
     rate = float(load_marte()["scheduler"]["rate_hz"])
     duration = settings.tick_duration_s
@@ -165,10 +215,13 @@ def run(settings: Settings, workdir: Path) -> dict[str, Any]:
     progress(f"tick: supervisor with {settings.poll_clients} clients polling at "
              f"{settings.poll_hz:g} Hz, {duration:g} s, baseline loop beside it")
     loaded = supervised(config, workdir, duration, rate, settings)
+    progress(f"tick: supervisor idle on real drivers (Sabertooth emulator processes, the "
+             f"Phidget library stand-in), {duration:g} s, baseline loop beside it")
+    real = real_drivers(workdir, duration, rate)
     return {
         "rate_hz": rate, "duration_s": duration,
         "baseline": "bare absolute-deadline loop waiting in select.select (µs timeout), "
                     "doing nothing, in its own process, running at the same time as the "
                     "supervisor so both see the same neighbours",
-        "idle": idle, "loaded": loaded,
+        "idle": idle, "loaded": loaded, "real_drivers_idle": real,
     }

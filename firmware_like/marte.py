@@ -155,6 +155,9 @@ class MarteWorld:
         self._digging = False
         self._chain_dig_speed = 0.0
         self.time = 0.0
+        #: Moves on whenever what the read_* methods return may have changed (a step, a
+        #: placement), so a reader need not sample again while it stands still.
+        self.revision = 0
         self.layout = layout if layout is not None else Layout(source="empty arena")
         self.terrain = Terrain(self.layout, self.arena, seed, flat=layout is None)
         self._flat = layout is None
@@ -292,6 +295,7 @@ class MarteWorld:
             raise ValueError(f"pose ({x}, {y}, {heading_deg} deg) puts the robot outside "
                              f"the {p.arena_length} x {p.arena_width} m arena")
         self._settle()
+        self.revision += 1
 
     # ---- derived state ------------------------------------------------------------------------
 
@@ -417,6 +421,7 @@ class MarteWorld:
         for _ in range(pieces):
             self._substep(h)
         self._sample_noise()
+        self.revision += 1
 
     def _substep(self, dt: float) -> None:
         p = self.params
@@ -663,9 +668,19 @@ class MarteWorld:
         return v0 + (v1 - v0) * (soc - s0) / (s1 - s0)
 
     def _corners(self) -> tuple[tuple[float, float], ...]:
-        """Footprint corners: front-left, front-right, rear-left, rear-right (world x, y)."""
-        p = self.params
-        return footprint_corners(self.x, self.y, self.heading, p.robot_length, p.robot_width)
+        """Footprint corners: front-left, front-right, rear-left, rear-right (world x, y),
+        worked out again only when the pose moved (the docking buttons read them every
+        tick)."""
+        pose = (self.x, self.y, self.heading)
+        if pose != self._corners_pose:
+            p = self.params
+            self._corners_pose = pose
+            self._corners_at = footprint_corners(self.x, self.y, self.heading,
+                                                 p.robot_length, p.robot_width)
+        return self._corners_at
+
+    _corners_pose: tuple[float, float, float] | None = None
+    _corners_at: tuple[tuple[float, float], ...] = ()
 
     def _sample_noise(self) -> None:
         """Draw this step's sensor noise once, so repeated reads agree and runs repeat."""

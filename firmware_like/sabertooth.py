@@ -270,12 +270,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--tcp", type=int, metavar="PORT",
                         help="listen on 127.0.0.1:PORT (0 picks one) instead of a pty")
     parser.add_argument("--dir", help="directory for the pty symlink (default: a temp dir)")
+    parser.add_argument("--quiet", action="store_true", help="do not print every packet")
     args = parser.parse_args(argv)
 
     def log(t: float, address: int, command: int, data: int) -> None:
         print(describe(t, address, command, data), flush=True)
 
-    emu = SabertoothEmulator(args.addresses, baud=args.baud, paced=args.paced, on_packet=log)
+    emu = SabertoothEmulator(args.addresses, baud=args.baud, paced=args.paced,
+                             on_packet=None if args.quiet else log)
     try:
         if args.tcp is not None:
             _serve_tcp(emu, args.tcp)

@@ -13,8 +13,12 @@ class RampError(Exception):
     code = "fault"
 
 
-class ConfigError(RampError):
-    """A configuration problem, located by file, line and key path."""
+class ConfigError(RampError, ValueError):
+    """A configuration problem, located by file, line and key path.
+
+    The one exception for a config mistake, wherever it is found (the loader, a driver or a
+    module checking the values it is built from); it is also a ValueError, since that is
+    what a bad value is."""
 
     code = "fault"
 

@@ -4,9 +4,11 @@ Why this shape (see shared/reference/platform-limits.md): an absolute-deadline l
 `select.select` (microsecond timeout) matches C `clock_nanosleep`, while epoll, poll and
 asyncio round their timeouts up to whole milliseconds (about 0.6 ms late every tick). But
 select cannot watch a descriptor numbered 1024 or more, and a server with many clients has
-some. So the wait is `poll` (no such limit) for the whole milliseconds, rounded down, then a
-microsecond `select` for the rest on the descriptors below 1024 (all of them, unless there are
-hundreds of clients; the others are looked at again right after). Input is dispatched the
+some. So while every descriptor is below 1024 (the usual case) the wait is one `select` with
+a microsecond timeout, one wake-up per tick as in the bare loop; with a descriptor past it,
+the wait is `poll` (no such limit) for the whole milliseconds, rounded down, then a
+microsecond `select` for the rest on the descriptors below 1024 (the others are looked at
+again right after). Input is dispatched the
 moment it arrives during the wait, so a request is answered on arrival, not at the next tick.
 Missed ticks are skipped, never replayed in a burst, and every overrun names the task that ate
 the budget.
@@ -49,6 +51,8 @@ TaskFn = Callable[[float, float], None]
 IoCallback = Callable[[], None]
 #: Called with (gap in s, the unit of work during which the time went) when the loop stalled.
 StallHandler = Callable[[float, str], None]
+#: Called with (now, how late the tick started, s) as each tick starts.
+TickHook = Callable[[float, float], None]
 #: The unit of work a gap is blamed on when it fell between ticks.
 WAIT = "the wait between ticks"
 
@@ -131,6 +135,10 @@ class Scheduler:
         self.stall_limit = max(stall_limit, 2 * self.period)
         #: Set by the owner (the supervisor): stops every module. None: stalls are not checked.
         self.on_stall: StallHandler | None = None
+        #: Observer hook: (now, lateness in s) as every tick starts. None costs nothing.
+        self.on_tick: TickHook | None = None
+        #: Observer hook: (now, s the tick's tasks took, bookkeeping included) as it ends.
+        self.on_tick_done: TickHook | None = None
         self.stalls = 0
         self._beat: float | None = None  # clock time the last tick started
         self._unit = WAIT  # the unit of work in progress (or last begun)
@@ -141,12 +149,15 @@ class Scheduler:
         self.stats = TickStats()
         self._readers: dict[int, IoCallback] = {}
         self._poller = select.poll()
+        #: Watched descriptors select cannot take (>= SELECT_FD_LIMIT): poll is used then.
+        self._high_fds: set[int] = set()
         #: Readers with input already read and not yet handled: served without waiting.
         self._pending: set[int] = set()
         #: Until when the I/O callback now running may work (the next tick's deadline).
         self.io_deadline = math.inf
         self._rotation = 0
         self._writers: dict[int, IoCallback] = {}
+        self._unit_names: dict[tuple[int, bool], str] = {}
         self._next: float | None = None
         self._index = 0
         self._stop = False
@@ -182,6 +193,11 @@ class Scheduler:
         self._pending.discard(fd)
         self._watch(fd)
 
+    @property
+    def pending(self) -> set[int]:
+        """Readers with work left over from their last turn (see `set_pending`)."""
+        return self._pending
+
     def set_pending(self, fd: int, pending: bool) -> None:
         """A reader with work left over from its last turn (input already read) gets another
         turn on the next pass, as if its fd were readable, without the wait blocking."""
@@ -203,7 +219,10 @@ class Scheduler:
         mask = (_IN if fd in self._readers else 0) | (_OUT if fd in self._writers else 0)
         if mask:
             self._poller.register(fd, mask)  # registers or modifies
+            if fd >= SELECT_FD_LIMIT:
+                self._high_fds.add(fd)
         else:
+            self._high_fds.discard(fd)
             with contextlib.suppress(KeyError):  # it was not watched
                 self._poller.unregister(fd)
 
@@ -255,7 +274,10 @@ class Scheduler:
 
     def _begin(self, unit: str) -> None:
         """Before each unit of work: a gap is blamed on the unit that was running."""
-        self.check_stall()
+        beat = self._beat
+        if self.on_stall is not None and beat is not None and (
+                self._stall_requested or self.clock.now() - beat > self.stall_limit):
+            self.check_stall()
         self._unit = unit
         self.current_task = unit
         self.alive_at = time.perf_counter()
@@ -289,36 +311,62 @@ class Scheduler:
         each pass so a busy client early in the list cannot starve the ones after it. A
         callback reads `io_deadline` to end its own turn in time.
         """
-        self.alive_at = time.perf_counter()
         if not self._readers and not self._writers:
             return 0
         if self._pending:
             timeout = 0.0
-        r, w = self._ready(timeout)
+        r, w = self._ready(timeout) if self._high_fds else self._ready_select(timeout)
         if self._pending:
             r = list(set(r) | self._pending)
+        if not w and len(r) == 1:  # the usual wake-up: one client's input (as _guard)
+            fd = r[0]
+            cb = self._readers.get(fd)
+            if cb is None:
+                return 0
+            what = self._unit_names.get((fd, False)) or self._unit_name(fd, False)
+            self._begin(what)
+            self.io_deadline = math.inf if deadline is None else deadline
+            try:
+                cb()
+            except Exception:
+                log.exception("I/O callback (%s) raised; the loop goes on", what)
+            finally:
+                self.io_deadline = math.inf
+                self.current_task = ""
+            self.alive_at = time.perf_counter()
+            return 1
+        self.io_deadline = math.inf if deadline is None else deadline
         ready = [(fd, True) for fd in w] + [(fd, False) for fd in r]  # output first: it frees
         if len(ready) > 1:
             self._rotation = (self._rotation + 1) % len(ready)
             ready = ready[self._rotation:] + ready[:self._rotation]
         ran = 0
-        self.io_deadline = math.inf if deadline is None else deadline
         try:
             for fd, writable in ready:
                 if ran and deadline is not None and self.clock.now() >= deadline:
                     break
                 cb = (self._writers if writable else self._readers).get(fd)
                 if cb is not None:
-                    self._guard(cb, f"{'output' if writable else 'input'} on fd {fd}")
+                    self._guard(cb, self._unit_name(fd, writable))
                     ran += 1
         finally:
             self.io_deadline = math.inf
         self.alive_at = time.perf_counter()
         return ran
 
+    def _ready_select(self, timeout: float) -> tuple[list[int], list[int]]:
+        """(readable, writable) descriptors while every one is below 1024: one select with a
+        microsecond timeout, one wake-up (see the docstring at the top)."""
+        try:
+            r, w, _ = select.select(self._readers.keys(), self._writers.keys(), [], timeout)
+        except (OSError, ValueError):  # a descriptor closed under us: poll says which
+            return self._ready(0.0)
+        return r, w
+
     def _ready(self, timeout: float) -> tuple[list[int], list[int]]:
-        """(readable, writable) descriptors, waiting at most `timeout` (see the docstring at
-        the top: whole milliseconds in poll, the rest in a microsecond select)."""
+        """(readable, writable) descriptors, waiting at most `timeout`, with a descriptor past
+        select's reach (see the docstring at the top: whole milliseconds in poll, the rest in
+        a microsecond select)."""
         ms = int(timeout * 1000)  # rounded down: poll rounds up
         events = self._poller.poll(ms)
         if not events and ms == 0 and timeout > 0:
@@ -350,6 +398,7 @@ class Scheduler:
             remaining = deadline - self.clock.now()
             if remaining <= 0:
                 if not polled:  # a late tick still lets one client's turn through
+                    self.alive_at = time.perf_counter()
                     self.poll_io(0.0, deadline)
                 return
             polled = True
@@ -366,27 +415,37 @@ class Scheduler:
         self._beat = now
         late = max(0.0, now - deadline)
         self.stats.record(late)
+        if self.on_tick is not None:
+            self.on_tick(now, late)
         missed = int(late // self.period)
         worst_name, worst_s = "", 0.0
+        clock_now, index, t = self.clock.now, self._index, now
         for task in list(self.tasks):
             # Skipped ticks move the index in jumps; a task runs at the first tick at or past
             # its slot (never twice to catch up), then waits for its next slot on the grid.
-            if not task.enabled or self._index < task.next_index:
+            if not task.enabled or index < task.next_index:
                 continue
-            task.next_index = (self._index // task.divisor + 1) * task.divisor
+            task.next_index = (index // task.divisor + 1) * task.divisor
             tdt = task.divisor * self.period if task.last_run is None else now - task.last_run
             task.last_run = now
-            self._begin(task.name)
-            t0 = self.clock.now()
+            # As _begin, with the time the previous task ended (one clock read per task).
+            if self.on_stall is not None and (
+                    self._stall_requested or t - self._beat > self.stall_limit):
+                self.check_stall()
+                t = clock_now()
+            self._unit = self.current_task = task.name
+            self.alive_at = time.perf_counter()
             try:
                 task.fn(now, tdt)
             except Exception:
                 task.errors += 1
                 log.exception("task %s raised; the loop goes on", task.name)
-            spent = self.clock.now() - t0
+            t1 = clock_now()
+            spent, t = t1 - t, t1
             task.runs += 1
             task.total_s += spent
-            task.max_s = max(task.max_s, spent)
+            if spent > task.max_s:
+                task.max_s = spent
             if spent > worst_s:
                 worst_name, worst_s = task.name, spent
         self.current_task = ""
@@ -401,6 +460,8 @@ class Scheduler:
         self._next = deadline + (1 + missed) * self.period
         # Tasks that ran past the next deadline: the overrun is this tick's, name its task.
         after = self.clock.now()
+        if self.on_tick_done is not None:
+            self.on_tick_done(now, after - now)
         if after > self._next:
             self.stats.record_missed(after - self._next)
             extra = int((after - self._next) // self.period) + 1
@@ -424,6 +485,14 @@ class Scheduler:
                         self._overruns_unlogged)
             self._last_overrun_log = now
             self._overruns_unlogged = 0
+
+    def _unit_name(self, fd: int, writable: bool) -> str:
+        """`input on fd 12`: what a stall in an I/O callback is blamed on (made once)."""
+        name = self._unit_names.get((fd, writable))
+        if name is None:
+            name = f"{'output' if writable else 'input'} on fd {fd}"
+            self._unit_names[(fd, writable)] = name
+        return name
 
     def _guard(self, cb: IoCallback, what: str) -> None:
         self._begin(what)

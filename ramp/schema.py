@@ -1,15 +1,21 @@
-"""Typed fields for configuration blocks.
+"""Typed fields for configuration blocks, and the one check every block goes through.
 
-Drivers and modules declare their YAML keys once as `Field`s; the config loader checks
-values against them and words errors the same way everywhere
-(`140 is not a Sabertooth address (128-135)`).
+Drivers and modules declare their YAML keys once as `Field`s, and the checks that span
+several keys of a block as `Rule`s beside them (a `Block` holds both). `validate` is the
+only code that checks a block: the config loader runs it on every block of `ramp.yaml` (and
+points at the line), and a driver or module built from values runs the same function
+(`check_block`), so a mistake is worded the same everywhere
+(`140 is not a Sabertooth address (128-135)`) and is always a `ConfigError`.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
+
+from ramp.errors import ConfigError
 
 REQUIRED: Any = object()
 
@@ -64,6 +70,74 @@ class Field:
         ):
             raise ValueError(f"{shorten(repr(value))} is not {self.expected()}")
         return v
+
+
+@dataclass(frozen=True)
+class Rule:
+    """A check spanning several keys of one block (thresholds in order, two calibration points
+    apart), declared beside the block's fields. It sees the block's checked values."""
+
+    holds: Callable[[Mapping[str, Any]], bool]
+    message: str
+    #: Where it is reported, relative to the block ("" is the block itself).
+    key: str = ""
+
+
+class Block(dict[str, Field]):
+    """A config block's keys (name -> `Field`) and the `Rule`s that span them."""
+
+    def __init__(self, fields: Mapping[str, Field] | None = None,
+                 rules: Iterable[Rule] = ()) -> None:
+        super().__init__(fields or {})
+        self.rules: tuple[Rule, ...] = tuple(rules)
+
+
+Problem = tuple[str, str]  # (key relative to the block, "" for the block itself; message)
+
+
+def validate(block: Mapping[str, Field], values: Mapping[str, Any] | None,
+             skip: Iterable[str] = ()) -> tuple[dict[str, Any], list[Problem]]:
+    """The one check of a config block: unknown keys, then each field, then the block's
+    rules (only once every field is good). Returns the values (converted, defaults filled
+    in; a bad key gets its default) and every problem found, in that order. Keys in `skip`
+    belong to someone else (a bus entry's `driver`)."""
+    given = values or {}
+    skipped = set(skip)
+    problems: list[Problem] = []
+    for key in given:
+        if key not in block and key not in skipped:
+            known = ", ".join(sorted([*block, *skipped])) or "none"
+            problems.append((str(key), f"unknown key (expected one of: {known})"))
+    out: dict[str, Any] = {}
+    bad_field = False
+    for key, f in block.items():
+        if key in given:
+            try:
+                out[key] = f.check(given[key])
+                continue
+            except ValueError as exc:
+                problems.append((key, str(exc)))
+        elif f.required:
+            problems.append((key, f"missing; expected {f.expected()}"))
+        else:
+            out[key] = f.default
+            continue
+        bad_field = True
+        if not f.required:
+            out[key] = f.default
+    if not bad_field:
+        problems += [(r.key, r.message) for r in getattr(block, "rules", ()) if not r.holds(out)]
+    return out, problems
+
+
+def check_block(block: Mapping[str, Field], values: Mapping[str, Any] | None, where: str,
+                skip: Iterable[str] = ()) -> dict[str, Any]:
+    """`validate`, raising the first problem as a `ConfigError` keyed `where.key`."""
+    out, problems = validate(block, values, skip)
+    if problems:
+        key, message = problems[0]
+        raise ConfigError(message, key=f"{where}.{key}" if key and where else key or where)
+    return out
 
 
 def shorten(text: str, limit: int = 60) -> str:

@@ -20,7 +20,7 @@ from ramp.clock import VirtualClock
 from ramp.config import BusConfig, Config, parse_config
 from ramp.hal.interfaces import Bus
 from ramp.hal.simio import SimBus
-from ramp.supervisor import Supervisor
+from ramp.runtime import build
 
 
 class FakeWorld:
@@ -118,8 +118,8 @@ class Harness:
         self.clock = VirtualClock()
         self.world = world if world is not None else FakeWorld()
         self.config = config_from(yaml_text)
-        self.sup = Supervisor(self.config, self.clock,
-                              bus_factory=bus_factory or self._bus, host="127.0.0.1", port=0)
+        self.sup = build(self.config, self.clock, bus_factory or self._bus,
+                         host="127.0.0.1", port=0)
         self.sup.start()
         self.clients: list[TestClient] = []
 
@@ -153,19 +153,20 @@ MARTE_YAML = (REPO / "ramp.yaml").read_text()
 
 
 class SimHarness(Harness):
-    """The MARTE config on the physics model through `ramp.sim.SimBackplane`, as `--sim`."""
+    """The MARTE config on the physics model through the `--sim` backplane
+    (`ramp.simulation.backplane.SimBackplane`)."""
 
     def __init__(self, yaml_text: str = MARTE_YAML, wire_level: bool = True,
                  seed: int = 0) -> None:
         from firmware_like.marte import MarteWorld
-        from ramp.sim import SimBackplane
+        from ramp.simulation.backplane import SimBackplane
 
         self.clock = VirtualClock()
         self.config = config_from(yaml_text.replace("port: 5577", "port: 0"))
         self.world = MarteWorld(seed=seed)
         self.backplane = SimBackplane(self.config, self.world, wire_level=wire_level)
-        self.sup = Supervisor(self.config, self.clock, bus_factory=self.backplane.bus_factory,
-                              host="127.0.0.1", port=0)
+        self.sup = build(self.config, self.clock, self.backplane.bus_factory,
+                         host="127.0.0.1", port=0)
         self.backplane.attach(self.sup)
         self.sup.start()
         self.sup.settle()

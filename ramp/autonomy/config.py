@@ -91,11 +91,9 @@ MISSION_FIELDS: dict[str, Field] = {
     "max_relocalize_tries": Field(int, 3, lo=0, hi=100, what="a number of tries"),
     # Perception (issue "Perception"): one localization's scans, the 3D scan's sweep.
     "localize_scans": Field(int, 10, lo=1, hi=400, what="a number of scans"),
-    "sweep_start_deg": Field(float, 0.0, lo=-30.0, hi=80.0,
-                             what="a tilt below the horizon in degrees"),
-    "sweep_end_deg": Field(float, 40.0, lo=-30.0, hi=80.0,
-                           what="a tilt below the horizon in degrees"),
-    "sweep_speed_dps": Field(float, 5.0, lo=0.5, hi=90.0, what="a tilt speed in deg/s"),
+    "sweep_spacing_m": Field(float, 0.04, lo=0.005, hi=0.5,
+                             what="a ground line spacing in m"),
+    "sweep_far_m": Field(float, 3.85, lo=0.5, hi=30.0, what="a distance in m"),
     # the state machine's (ramp/statemachine/settings.py MissionConfig; a test keeps both equal)
     "max_step_retries": Field(int, 3, lo=0, hi=100, what="a number of tries"),
     "min_pose_confidence": Field(float, 0.5, lo=0.0, hi=1.0, what="a confidence (0-1)"),
@@ -107,7 +105,6 @@ MISSION_FIELDS: dict[str, Field] = {
     # the executive's (ramp/autonomy/executive/settings.py ExecutiveSettings; a test keeps
     # both equal)
     "still_s": Field(float, 0.3, lo=0.0, hi=10.0, what="a time in s"),
-    "sweep_spacing_m": Field(float, 0.04, lo=0.005, hi=1.0, what="a distance in m"),
     "vantage_x_m": Field(float, 0.80, lo=0.6, hi=0.9, what="an x in the start region in m"),
     "drive_speed_pct": Field(float, 60.0, lo=5.0, hi=100.0, what="a speed in %"),
     "relocalize_every_m": Field(float, 1.2, lo=0.1, hi=20.0, what="a distance in m"),

@@ -5,65 +5,74 @@ a CAN interface. It hands out channel objects (motor, analog in, ...) at build t
 channels keep working objects even while the bus is unplugged, so the layers above never
 hold dangling references across a hot-plug.
 
-Template pattern (as python-can's `BusABC`): public methods validate and record, drivers
-implement the `_`-prefixed hooks. Nothing here blocks: reads return the newest sample the
-bus's `tick` collected, writes are queued and flushed by `tick`.
+Template pattern (as python-can's `BusABC`): public methods check and record, drivers
+implement the `_`-prefixed hooks. Nothing here blocks.
+
+- **Commands.** A channel holds what it is commanded (`MotorChannel.duty`,
+  `DigitalOutput.state`): that is the one copy of the value. It hands a new value to its bus
+  through the bus's public `command_motor` / `command_output`, and the driver reads the
+  channel when it sends (now, or at a refresh); drivers keep only what they have put on the
+  wire. The layers above validated the value (the router checks every request against the
+  module's table), so a channel only asserts the range, and never clamps. The bus itself
+  sets its motors' duty to 0 when it opens (a device starts from rest) and when it stops them
+  (`stop_motors`, `close`); within the loop that happens only together with a stop of the
+  modules above, in the same unit of work (a stall, a fault, shutdown), so no layer ever
+  reads a value the wire no longer carries.
+- **Readings.** An input channel's `read()` returns the sample its bus's `tick` collected;
+  readings change only inside a tick, which is what lets the layers above cache a `get`
+  answer between ticks (see `ramp.layers.module_distribution`).
+- **Faults.** A driver that meets an I/O error outside `tick` (in a command, in `drain`)
+  records it in `failure`; `tick` raises it (or raises its own) as a `DeviceError` naming the
+  bus. That is the one route by which a device fault reaches the layers above.
 
 Each bus has a lock, held by every public method that reaches its driver (open, tick, a
-motor or output command, stop, close). Only one other thread ever takes it: the stall guard,
-which writes zeros while the loop is stuck, and which must never do so while the loop is
-inside the same pyserial object; it waits a moment for the lock and otherwise leaves that
+motor or output command, drain, stop, close). Only one other thread ever takes it: the stall
+guard, which writes zeros while the loop is stuck, and which must never do so while the loop
+is inside the same pyserial object; it waits a moment for the lock and otherwise leaves that
 bus to its controller's own timeout (`try_stop_motors`).
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import threading
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
-from ramp.errors import ConfigError
-from ramp.schema import Field
+from ramp.errors import ConfigError, DeviceError
+from ramp.schema import Field, check_block
 
 #: Channel kinds a bus may offer; YAML device entries name one through their module's schema.
 KINDS = ("motor", "analog_in", "digital_in", "digital_out", "bridge_in")
 
+#: Called with (channel label, value) for every command a bus hands to its driver.
+CommandHook = Callable[[str, float], None]
 
-class MotorChannel(ABC):
-    """One motor output. Duty is signed, -1..1, as the controller sees it (no polarity)."""
+
+class MotorChannel:
+    """One motor output. `duty` is signed, -1..1, as the controller sees it (no polarity)."""
 
     def __init__(self, bus: Bus, label: str) -> None:
         self.bus = bus
         self.label = label
-        self._duty = 0.0
-
-    @property
-    def duty(self) -> float:
-        """The duty last commanded."""
-        return self._duty
+        #: The duty commanded now: the one copy, which the driver reads when it sends.
+        self.duty = 0.0
 
     def set_duty(self, duty: float) -> None:
-        if not isinstance(duty, int | float) or not math.isfinite(duty):
-            raise ValueError(f"{self.label}: duty must be a finite number, got {duty!r}")
+        """Command `duty`. The router validated the request it comes from, so a value out of
+        -1..1 (or NaN) is a bug above: refused, never clamped."""
         if not -1.0 <= duty <= 1.0:
-            raise ValueError(f"{self.label}: duty {duty} is outside -1..1")
+            raise ValueError(f"{self.label}: duty {duty!r} is outside -1..1")
         bus = self.bus
         if bus is None:
-            self._duty = float(duty)
-            self._apply(self._duty)
+            self.duty = duty
+            self._apply(duty)
             return
-        if not bus.gate():
-            return  # computed before a stall: the loop's stall handler stops this motor
-        with bus.lock:
-            self._duty = float(duty)
-            self._apply(self._duty)
+        bus.command_motor(self, duty)
 
-    @abstractmethod
     def _apply(self, duty: float) -> None:
-        """Queue the duty for the wire; the bus's tick (or this call) sends it."""
+        """A channel with no bus (a stand-in in a test) sees its new duty here."""
 
 
 class AnalogInput(ABC):
@@ -75,7 +84,7 @@ class AnalogInput(ABC):
 
     @abstractmethod
     def read(self) -> float:
-        """The newest sample, in volts."""
+        """The sample the bus's last tick collected, in volts (NaN before the first)."""
 
 
 class DigitalInput(ABC):
@@ -87,35 +96,31 @@ class DigitalInput(ABC):
 
     @abstractmethod
     def read(self) -> bool:
-        """The newest state."""
+        """The state the bus's last tick collected."""
 
 
-class DigitalOutput(ABC):
+class DigitalOutput:
     """A digital output (an LED)."""
 
     def __init__(self, bus: Bus, label: str) -> None:
         self.bus = bus
         self.label = label
-        self._state = False
-
-    @property
-    def state(self) -> bool:
-        return self._state
+        #: The state commanded now: the one copy, which the driver reads when it sends.
+        self.state = False
 
     def write(self, on: bool) -> None:
         on = bool(on)
-        if on != self._state:
-            if self.bus is None:
-                self._state = on
-                self._apply(on)
-                return
-            with self.bus.lock:
-                self._state = on
-                self._apply(on)
+        if on == self.state:
+            return
+        bus = self.bus
+        if bus is None:
+            self.state = on
+            self._apply(on)
+            return
+        bus.command_output(self, on)
 
-    @abstractmethod
     def _apply(self, on: bool) -> None:
-        """Drive the pin."""
+        """A channel with no bus (a stand-in in a test) sees its new state here."""
 
 
 class BridgeInput(ABC):
@@ -127,11 +132,16 @@ class BridgeInput(ABC):
 
     @abstractmethod
     def read(self) -> float:
-        """The newest ratio, in mV/V."""
+        """The ratio the bus's last tick collected, in mV/V (NaN before the first)."""
 
 
 def _always() -> bool:
     return True
+
+
+def _own(fields: Mapping[str, Field], values: Mapping[str, Any]) -> dict[str, Any]:
+    """The keys of `values` that `fields` declares (see `Bus.check_params`)."""
+    return {k: v for k, v in values.items() if k in fields}
 
 
 class Bus(ABC):
@@ -145,77 +155,125 @@ class Bus(ABC):
     #: The name YAML uses in `driver:`.
     driver_name: ClassVar[str] = ""
     #: Bus-level YAML keys (besides `driver` and `sim`).
-    fields: ClassVar[dict[str, Field]] = {}
+    fields: ClassVar[Mapping[str, Field]] = {}
     #: Per kind, the keys a device entry uses to pick a channel on this bus.
-    channel_fields: ClassVar[dict[str, dict[str, Field]]] = {}
+    channel_fields: ClassVar[Mapping[str, Mapping[str, Field]]] = {}
 
     def __init__(self, name: str, params: Mapping[str, Any]) -> None:
         self.name = name
         self.params = dict(params)
         self.is_open = False
         self.motors: list[MotorChannel] = []
+        self.outputs: list[DigitalOutput] = []
         #: Asked before motion output; False means the loop has stalled and not yet stopped
-        #: everything, so what is about to go out is stale. The supervisor sets it.
+        #: everything, so what is about to go out is stale. The runtime sets it.
         self.gate: Callable[[], bool] = _always
         #: Held while the loop (or the stall guard) is inside the driver; see the docstring.
         self.lock = threading.RLock()
+        #: An I/O error met outside `tick`, raised by the next `tick` (see the docstring).
+        self.failure: DeviceError | None = None
+        #: True while the loop waits on `fileno()` and calls `drain` when it is readable, so
+        #: a driver need not poll its descriptor in `tick` (the runtime sets it).
+        self.watched = False
+        #: Observer hook: every command handed to the driver (label, duty or 0/1). None
+        #: costs nothing; the runtime sets it for a recorder.
+        self.on_command: CommandHook | None = None
 
     def check_params(self, params: Mapping[str, Any]) -> dict[str, Any]:
-        """This driver's keys of `params`, checked against `fields`, defaults filled in.
-
-        The config loader has already checked them; this keeps a bus built directly (tests,
-        tools) from accepting a bad value. Keys of other drivers are ignored, since the sim
-        driver stands in for any of them. Raises ConfigError naming `buses.NAME.KEY`.
-        """
-        out: dict[str, Any] = {}
-        for key, f in self.fields.items():
-            try:
-                if key in params:
-                    out[key] = f.check(params[key])
-                elif f.required:
-                    raise ValueError(f"missing; expected {f.expected()}")
-                else:
-                    out[key] = f.default
-            except ValueError as exc:
-                raise ConfigError(str(exc), key=f"buses.{self.name}.{key}") from None
-        return out
+        """This driver's keys of `params`, checked against `fields`, defaults filled in: the
+        one block check the config loader also runs (ConfigError naming `buses.NAME.KEY`).
+        Other keys are left alone: the loader reports unknown keys, and the sim driver
+        stands in for any driver, whose keys it keeps under `--sim`."""
+        return check_block(self.fields, _own(self.fields, params), f"buses.{self.name}")
 
     # -- channels -----------------------------------------------------------------------------
     def channel(self, kind: str, label: str, spec: Mapping[str, Any]) -> Any:
-        """Build the channel of `kind` chosen by `spec` (already checked against
-        `channel_fields[kind]`)."""
+        """Build the channel of `kind` chosen by `spec`, checked against
+        `channel_fields[kind]` (the same check as the loader's)."""
         if kind not in self.channel_fields:
-            raise ValueError(f"driver {self.driver_name} has no {kind} channels")
-        ch = self._make_channel(kind, label, dict(spec))
+            raise ConfigError(f"driver {self.driver_name} has no {kind} channels", key=label)
+        fields = self.channel_fields[kind]
+        ch = self._make_channel(kind, label, check_block(fields, _own(fields, spec), label))
         if isinstance(ch, MotorChannel):
             self.motors.append(ch)
+        elif isinstance(ch, DigitalOutput):
+            self.outputs.append(ch)
         return ch
 
     @abstractmethod
     def _make_channel(self, kind: str, label: str, spec: dict[str, Any]) -> Any:
-        """Driver hook: return the channel object."""
+        """Driver hook: return the channel object (`spec` is checked, defaults filled in)."""
+
+    # -- commands (from this bus's channels) --------------------------------------------------
+    def command_motor(self, ch: MotorChannel, duty: float) -> None:
+        """A motor channel of this bus is commanded `duty`: record it on the channel and let
+        the driver send it. Dropped while the loop has stalled and not yet stopped everything
+        (`gate`): a value computed before the gap must never reach the wire."""
+        if not self.gate():
+            return
+        with self.lock:
+            ch.duty = duty
+            if self.is_open:
+                self._motor_changed(ch)
+        if self.on_command is not None:
+            self.on_command(ch.label, duty)
+
+    def command_output(self, ch: DigitalOutput, on: bool) -> None:
+        """A digital output of this bus is switched: record it, let the driver send it."""
+        with self.lock:
+            ch.state = on
+            if self.is_open:
+                self._output_changed(ch)
+        if self.on_command is not None:
+            self.on_command(ch.label, float(on))
+
+    def _motor_changed(self, ch: MotorChannel) -> None:  # noqa: B027 - optional hook
+        """Driver hook: `ch.duty` changed (bus open, lock held). Send it now or soon; an I/O
+        error goes to `failure`, never out of here."""
+
+    def _output_changed(self, ch: DigitalOutput) -> None:  # noqa: B027 - optional hook
+        """Driver hook: `ch.state` changed (bus open, lock held); as `_motor_changed`."""
 
     # -- lifecycle ----------------------------------------------------------------------------
     def open(self, now: float) -> None:
+        """Open the device; it starts from rest (zeros, whatever was asked while closed)."""
         if self.is_open:
             return
         with self.lock:
+            self.failure = None
+            for m in self.motors:
+                m.duty = 0.0
             self._open(now)
             self.is_open = True
 
     def tick(self, now: float, dt: float) -> None:
-        if self.is_open and self.gate():  # no refresh of a pre-stall value
+        """Collect readings, send what is due; raises DeviceError when the device failed."""
+        if not self.is_open:
+            return
+        failure = self.failure
+        if failure is not None:
+            raise failure
+        if self.gate():  # no refresh of a pre-stall value
             with self.lock:
                 self._tick(now, dt)
 
-    def stop_motors(self) -> None:
-        """Command zero on every motor channel and push it to the wire now."""
-        for m in self.motors:
-            m._duty = 0.0
+    def drain(self, now: float) -> None:
+        """The device has input (its `fileno()` is readable): read it now. An error is kept
+        in `failure` for the next `tick`."""
         if self.is_open:
             with self.lock:
-                if self.is_open:
-                    self._stop_motors()
+                self.on_readable(now)
+
+    def stop_motors(self) -> None:
+        """Command zero on every motor and put it on the wire now, whatever the pacing. The
+        layers above are stopped in the same unit of work (the stall handler, a fault,
+        shutdown); from the stall guard's thread, the loop's stall handler stops them before
+        anything else goes out."""
+        with self.lock:
+            for m in self.motors:
+                m.duty = 0.0
+            if self.is_open:
+                self._stop_motors()
 
     def try_stop_motors(self, wait: float) -> bool:
         """`stop_motors` from another thread (the stall guard): False, and nothing written,
@@ -251,11 +309,11 @@ class Bus(ABC):
         return self.is_open
 
     def fileno(self) -> int | None:
-        """A file descriptor the scheduler can wait on for input, or None."""
+        """A file descriptor the scheduler can wait on for input (or a hang-up), or None."""
         return None
 
     def on_readable(self, now: float) -> None:  # noqa: B027 - optional hook, default no-op
-        """Called by the scheduler when `fileno()` has input."""
+        """Driver hook for `drain` (lock held): the descriptor of `fileno()` is readable."""
 
     @abstractmethod
     def _open(self, now: float) -> None: ...

@@ -29,7 +29,7 @@ from typing import Any, ClassVar
 
 import can
 
-from ramp.errors import DeviceError
+from ramp.errors import ConfigError, DeviceError
 from ramp.hal import odrive_codec as oc
 from ramp.hal.interfaces import Bus, MotorChannel
 from ramp.schema import Field
@@ -50,19 +50,13 @@ class _Motor(MotorChannel):
         super().__init__(bus, label)
         self.node_id = node_id
 
-    def _apply(self, duty: float) -> None:
-        bus = self.bus
-        assert isinstance(bus, ODriveBus)
-        bus._duty_changed(self.node_id, duty)
-
 
 @dataclass
 class _Node:
     """What the driver knows about one axis."""
 
     node_id: int
-    label: str
-    duty: float = 0.0
+    channel: _Motor  # its duty is the commanded value; the node keeps only wire state
     dirty: bool = False
     next_refresh: float = 0.0
     last_heartbeat: float | None = None
@@ -71,6 +65,10 @@ class _Node:
     up: bool = False  # has reported CLOSED_LOOP_CONTROL since open
     encoder: tuple[float, float] | None = None
     bus_voltage: float | None = None
+
+    @property
+    def label(self) -> str:
+        return self.channel.label
 
     @property
     def who(self) -> str:
@@ -111,20 +109,19 @@ class ODriveBus(Bus):
         self._bus: can.BusABC | None = None
         self._opened_at = 0.0
         self._now = 0.0
-        self._pending: DeviceError | None = None
         #: Frame counters: sent, recv (all), ignored (not ours or not used), bad (undecodable).
         self.stats: dict[str, int] = {"sent": 0, "recv": 0, "ignored": 0, "bad": 0}
 
     # -- channels -------------------------------------------------------------------------------
     def _make_channel(self, kind: str, label: str, spec: dict[str, Any]) -> Any:
-        node_id = self.channel_fields["motor"]["node_id"].check(spec.get("node_id"))
+        node_id = spec["node_id"]
         if node_id in self._nodes:
-            raise ValueError(
+            raise ConfigError(
                 f"node_id {node_id} is already used by {self._nodes[node_id].label} "
-                f"on bus {self.name}"
-            )
-        self._nodes[node_id] = _Node(node_id, label)
-        return _Motor(self, label, node_id)
+                f"on bus {self.name}", key=label)
+        channel = _Motor(self, label, node_id)
+        self._nodes[node_id] = _Node(node_id, channel)
+        return channel
 
     # -- queries --------------------------------------------------------------------------------
     def encoder(self, node_id: int) -> tuple[float, float] | None:
@@ -167,7 +164,7 @@ class ODriveBus(Bus):
         try:
             self._drain(now)
         except DeviceError as exc:
-            self._pending = exc
+            self.failure = self.failure or exc
 
     # -- lifecycle ------------------------------------------------------------------------------
     def _open(self, now: float) -> None:
@@ -181,12 +178,8 @@ class ODriveBus(Bus):
             ) from exc
         self._opened_at = now
         self._now = now
-        self._pending = None
-        for m in self.motors:
-            m._duty = 0.0  # start from rest, whatever was asked while closed
         try:
             for node in self._nodes.values():
-                node.duty = 0.0
                 node.dirty = False
                 node.up = False
                 node.last_heartbeat = None
@@ -212,9 +205,6 @@ class ODriveBus(Bus):
 
     def _tick(self, now: float, dt: float) -> None:
         self._now = now
-        if self._pending is not None:
-            exc, self._pending = self._pending, None
-            raise exc
         caught_up = self._drain(now)
         self._check(now, stale=caught_up)
         for node in self._nodes.values():
@@ -224,9 +214,8 @@ class ODriveBus(Bus):
     def _stop_motors(self) -> None:
         failed: DeviceError | None = None
         for node in self._nodes.values():
-            node.duty = 0.0
             try:
-                self._send_vel(node, self._now)
+                self._send_vel(node, self._now, stop=True)
             except DeviceError as exc:
                 failed = failed or exc
         if failed is not None:
@@ -251,28 +240,26 @@ class ODriveBus(Bus):
             with contextlib.suppress(can.CanError, OSError):  # closing must always finish
                 bus.shutdown()
 
-    def _duty_changed(self, node_id: int, duty: float) -> None:
+    def _motor_changed(self, ch: MotorChannel) -> None:
         """Send the new velocity now; a failure surfaces from the next tick, not the request."""
-        node = self._nodes[node_id]
-        node.duty = duty
+        assert isinstance(ch, _Motor)
+        node = self._nodes[ch.node_id]
         node.dirty = True
         if self._bus is None:
             return
         try:
             self._send_vel(node, self._now)
         except DeviceError as exc:
-            self._pending = self._pending or exc
+            self.failure = self.failure or exc
 
-    def _send_vel(self, node: _Node, now: float) -> None:
+    def _send_vel(self, node: _Node, now: float, stop: bool = False) -> None:
+        """Set_Input_Vel for the channel's duty (or 0 for a stop, which leaves the commanded
+        value to the layers above)."""
         node.dirty = True  # stays set if the send fails, so the next tick retries
-        data = oc.encode_set_input_vel(self._velocity(node))
-        self._send(node.node_id, oc.Cmd.SET_INPUT_VEL, data)
+        vel = 0.0 if stop else node.channel.duty * self.max_vel
+        self._send(node.node_id, oc.Cmd.SET_INPUT_VEL, oc.encode_set_input_vel(vel))
         node.dirty = False
         node.next_refresh = now + self.refresh
-
-    def _velocity(self, node: _Node) -> float:
-        """Commanded velocity in turns/s."""
-        return node.duty * self.max_vel
 
     def _send(self, node_id: int, cmd: int, data: bytes, remote: bool = False) -> None:
         if self._bus is None:

@@ -23,7 +23,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from ramp.errors import DeviceError
+from ramp.errors import ConfigError, DeviceError
 from ramp.hal.interfaces import AnalogInput, BridgeInput, Bus, DigitalInput, DigitalOutput
 from ramp.schema import Field
 
@@ -100,13 +100,18 @@ class _Slot:
     value: float | bool | None = None  # newest sample; None until the first one
     heard: bool = False  # a sample or an error event arrived since open
     error_code: int | None = None  # last error event, cleared by the next sample
-    want: bool = False  # digital out: the state commanded
+    output: DigitalOutput | None = None  # digital out: its channel holds the state commanded
     sent: bool | None = None  # digital out: the state last handed to the library
     retry_at: float = -math.inf
 
     @property
     def is_input(self) -> bool:
         return self.kind != "digital_out"
+
+    @property
+    def want(self) -> bool:
+        """Digital out: the state its channel is commanded."""
+        return self.output is not None and self.output.state
 
     def where(self) -> str:
         return f"{self.kind} channel {self.channel}"
@@ -148,11 +153,7 @@ class _DigitalIn(DigitalInput):
 class _DigitalOut(DigitalOutput):
     def __init__(self, bus: PhidgetBus, label: str, slot: _Slot) -> None:
         super().__init__(bus, label)
-        self._slot = slot
-
-    def _apply(self, on: bool) -> None:
-        # Only recorded here; the bus's tick hands it to the library when attached.
-        self._slot.want = on
+        slot.output = self  # the bus's tick hands its state to the library when attached
 
 
 _HAL_CLASS: dict[str, type] = {
@@ -199,33 +200,26 @@ class PhidgetBus(Bus):
         self._slots: list[_Slot] = []
         self._queue: queue.SimpleQueue[Event] = queue.SimpleQueue()
         self._opened_at = 0.0
+        #: Some channel needs the per-channel pass of `_tick` (attaching, not heard from, an
+        #: output not yet as commanded); idle ticks skip it.
+        self._care = True
         #: Error events seen, per Phidget22 error-event code (for health reports and tests).
         self.error_counts: dict[int, int] = {}
 
     # -- channels ---------------------------------------------------------------------------
     def _make_channel(self, kind: str, label: str, spec: dict[str, Any]) -> Any:
-        checked: dict[str, Any] = {}
-        for key, f in self.channel_fields[kind].items():
-            if key in spec:
-                checked[key] = f.check(spec[key])
-            elif f.required:
-                raise ValueError(f"{label}: {key} missing; expected {f.expected()}")
-            else:
-                checked[key] = f.default
-        channel = checked["channel"]
-        gain = checked.get("gain", 128)
+        channel = spec["channel"]
+        gain = spec.get("gain", 128)
         slot = next((s for s in self._slots if s.kind == kind and s.channel == channel), None)
         if slot is None:
             slot = _Slot(kind=kind, channel=channel, gain=gain)
             self._slots.append(slot)
         elif kind == "digital_out":
-            raise ValueError(
-                f"{label}: digital_out channel {channel} is already driven by {slot.who()}"
-            )
+            raise ConfigError(
+                f"digital_out channel {channel} is already driven by {slot.who()}", key=label)
         elif kind == "bridge_in" and slot.gain != gain:
-            raise ValueError(
-                f"{label}: bridge_in channel {channel} already uses gain {slot.gain}"
-            )
+            raise ConfigError(
+                f"bridge_in channel {channel} already uses gain {slot.gain}", key=label)
         slot.labels.append(label)
         return _HAL_CLASS[kind](self, label, slot)
 
@@ -237,6 +231,7 @@ class PhidgetBus(Bus):
         q: queue.SimpleQueue[Event] = queue.SimpleQueue()
         self._queue = q
         self._opened_at = now
+        self._care = True
         for slot in self._slots:
             slot.attached = False
             slot.value = None
@@ -326,15 +321,27 @@ class PhidgetBus(Bus):
             except queue.Empty:
                 break
             self._handle(self._slots[idx], event, payload, now)
+        if not self._care:
+            return  # every channel attached and heard, every output as commanded
+        care = False
         for idx, slot in enumerate(self._slots):
             if slot.kind == "digital_in" and slot.attached and not slot.heard:
                 self._seed(slot)
+                care = care or not slot.heard
             elif slot.kind == "digital_out":
                 self._flush(slot, idx, now)
-        if not self.ready() and now - self._opened_at > self.attach_timeout:
+                care = care or slot.sent != slot.want
+        ready = self.ready()
+        if not ready and now - self._opened_at > self.attach_timeout:
             raise self._timeout_error()
+        self._care = care or not ready
+
+    def _output_changed(self, ch: DigitalOutput) -> None:
+        self._care = True  # the tick hands the new state to the library
 
     def _handle(self, slot: _Slot, event: str, payload: Any, now: float) -> None:
+        if event != _SAMPLE or not slot.heard:
+            self._care = True  # something to look at in this tick's per-channel pass
         if event == _SAMPLE:
             if slot.kind == "bridge_in":
                 slot.value = float(payload) * 1000.0  # V/V -> mV/V

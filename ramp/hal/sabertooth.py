@@ -3,8 +3,9 @@
 Up to eight controllers (addresses 128-135, two motors each) share one TX wire; nothing comes
 back. The wire is slow (9600 baud carries 240 packets/s), so this driver is mostly a pacer:
 
-- **Newest wins.** Each channel holds at most one pending value; a newer `set_duty` replaces
-  it, so a burst of requests never builds a backlog of stale commands.
+- **Newest wins.** A changed channel is only marked pending; its packet is built from the
+  channel's duty when it is sent, so a burst of requests never builds a backlog of stale
+  commands (and the driver keeps no copy of the commanded value, only what is on the wire).
 - **Changes first, at once.** `set_duty` marks the channel pending and writes it straight
   away when the budget allows, so a request is on the wire before the next tick.
 - **Budget.** A token bucket of `baud/10 - 32` bytes/s holding at most 32 bytes: any one
@@ -29,14 +30,20 @@ anything else, so the controller never sees half a packet followed by a new one.
 `open` (start-up programming) and `stop_motors` (safety beats the budget) may wait briefly
 for the OS buffer; both still charge their bytes to the budget.
 
-Errors: a write that fails inside `set_duty` is remembered and raised by the next `tick` as
-a `DeviceError` naming the bus (a request handler never sees an I/O exception); `tick` also
-polls the port for a hang-up, so an unplugged adapter is noticed within one tick.
+Errors: a write that fails inside `set_duty` is remembered (`failure`) and raised by the
+next `tick` as a `DeviceError` naming the bus (a request handler never sees an I/O
+exception). A Sabertooth never talks back, so a readable port means a hang-up: `tick` looks
+for one (a zero-timeout `select`), so an unplugged adapter is noticed within one tick. (The
+port is not in the loop's wait: the kernel would poll the tty at every request answered.)
+
+Every packet a channel can send is built once, when the channel is (`SabertoothMotor`), with
+the codec's checks; sending is then a table lookup.
 """
 
 from __future__ import annotations
 
 import contextlib
+import math
 import select
 import sys
 from collections.abc import Mapping
@@ -68,18 +75,25 @@ Key = tuple[int, int]  # (address, motor)
 
 
 class SabertoothMotor(MotorChannel):
-    """One motor output of one controller; `set_duty` hands the value to the bus's pacer."""
+    """One motor output of one controller, with every packet it can send built once."""
 
     def __init__(self, bus: SabertoothBus, label: str, address: int, motor: int) -> None:
         super().__init__(bus, label)
         self.address = address
         self.motor = motor
         self.key: Key = (address, motor)
+        forward, _ = codec.duty_command(motor, 0.0)
+        #: Packets by speed byte 0..127, forward and backward (the codec checks them here).
+        self._forward = [codec.encode(address, forward, s) for s in range(128)]
+        self._backward = [codec.encode(address, forward + 1, s) for s in range(128)]
+        self.zero = self._forward[0]
 
-    def _apply(self, duty: float) -> None:
-        bus = self.bus
-        assert isinstance(bus, SabertoothBus)
-        bus._changed(self, duty)
+    def packet(self) -> bytes:
+        """The packet for the duty commanded now, as `codec.encode_motor` builds it."""
+        duty = self.duty
+        if duty < 0:
+            return self._backward[round(-duty * 127)]
+        return self._forward[round(duty * 127)]
 
 
 class SabertoothBus(Bus):
@@ -132,7 +146,9 @@ class SabertoothBus(Bus):
         self._reset_state()
 
     def _reset_state(self) -> None:
-        self._pending: dict[Key, bytes] = {}  # insertion order = order of change
+        #: Channels whose duty changed and is not on the wire yet, in order of change (the
+        #: packet is built from the channel when it is sent: newest wins by construction).
+        self._pending: dict[Key, None] = {}
         self._sent: dict[Key, bytes] = {}
         self._sent_at: dict[Key, float] = {}
         self._programmed_at: dict[int, float] = {}
@@ -141,7 +157,7 @@ class SabertoothBus(Bus):
         self._tokens = float(BURST_BYTES)
         self._refilled_at = self._now
         self._wire_free_at = self._now  # when the bytes written so far will have left
-        self._failure: DeviceError | None = None
+        self._due_at = -math.inf  # next refresh or reprogramming; -inf: to be worked out
 
     # -- channels -----------------------------------------------------------------------------
     def _make_channel(self, kind: str, label: str, spec: dict[str, Any]) -> Any:
@@ -193,8 +209,6 @@ class SabertoothBus(Bus):
             self._fd = ser.fileno()
         except (AttributeError, OSError, ValueError):
             self._room_cap = getattr(ser, "buffer_size", None) if in_process else None
-        for ch in self._channels.values():
-            ch._duty = 0.0  # what the controller gets below; stale values must not read back
         start = bytearray()
         if self.autobaud:
             start.append(codec.AUTOBAUD)
@@ -202,9 +216,8 @@ class SabertoothBus(Bus):
             start += codec.encode_timeout(address, self.timeout_s)
             self._programmed_at[address] = now
         for key, ch in self._channels.items():
-            pkt = codec.encode_motor(ch.address, ch.motor, 0.0)
-            start += pkt
-            self._sent[key] = pkt
+            start += ch.zero
+            self._sent[key] = ch.zero
             self._sent_at[key] = now
         self.stats["packets_sent"] += len(start) // codec.PACKET_LEN
         try:
@@ -220,8 +233,6 @@ class SabertoothBus(Bus):
             raise DeviceError(self.name, f"cannot write to {self.port}: {exc}") from exc
 
     def _tick(self, now: float, dt: float) -> None:
-        if self._failure is not None:
-            raise self._failure
         self._now = now
         if dt > 0:
             self._queue_limit = max(self._byte_time * codec.PACKET_LEN, dt)
@@ -229,9 +240,22 @@ class SabertoothBus(Bus):
         self._tokens = min(float(BURST_BYTES), self._tokens + self.rate * elapsed)
         self._refilled_at = now
         self._check_alive()
-        self._pump()
-        if self._failure is not None:
-            raise self._failure
+        if self._pending or self._tail or now >= self._next_due():
+            self._pump()
+        if self.failure is not None:
+            raise self.failure
+
+    def _next_due(self) -> float:
+        """When the next refresh or reprogramming falls due (worked out again only after a
+        packet went out), so an idle tick costs a comparison, not a scan."""
+        if self._due_at == -math.inf:
+            refresh = min(self._sent_at.values(), default=math.inf) + self.refresh_period
+            program = min(self._programmed_at.values(), default=math.inf) + REPROGRAM_PERIOD_S
+            self._due_at = min(refresh, program)
+        return self._due_at
+
+    # No `fileno()` for the loop to watch: a tty in the loop's wait is polled by the kernel
+    # at every wake-up (every request answered), which costs more than one look per tick.
 
     def _stop_motors(self) -> None:
         """Zeros for every channel, written now whatever the budget: stopping is a safety
@@ -242,11 +266,11 @@ class SabertoothBus(Bus):
         data = bytearray(self._tail_as_stop())
         self._tail, self._tail_packet = b"", b""
         for key, ch in self._channels.items():
-            pkt = codec.encode_motor(ch.address, ch.motor, 0.0)
-            data += pkt
-            self._sent[key] = pkt
+            data += ch.zero
+            self._sent[key] = ch.zero
             self._sent_at[key] = self._now
             self.stats["packets_sent"] += 1
+        self._due_at = -math.inf
         self._write_blocking(bytes(data))
 
     def _tail_as_stop(self) -> bytes:
@@ -265,17 +289,16 @@ class SabertoothBus(Bus):
             _release(ser)
 
     # -- pacing -------------------------------------------------------------------------------
-    def _changed(self, ch: SabertoothMotor, duty: float) -> None:
-        """A channel's duty changed: keep only the newest value, then send what fits."""
-        pkt = codec.encode_motor(ch.address, ch.motor, duty)
-        if not self.is_open:
-            return
-        if pkt == self._sent.get(ch.key):
+    def _motor_changed(self, ch: MotorChannel) -> None:
+        """A channel's duty changed: mark it (the newest value is read when it is sent) unless
+        the controller already has it, then send what fits."""
+        assert isinstance(ch, SabertoothMotor)
+        if ch.packet() == self._sent.get(ch.key):
             self._pending.pop(ch.key, None)  # the controller already has this value
         else:
-            self._pending[ch.key] = pkt  # an existing key keeps its place in the order
+            self._pending[ch.key] = None  # an existing key keeps its place in the order
             self.stats["max_pending"] = max(self.stats["max_pending"], len(self._pending))
-        if self._failure is None:
+        if self.failure is None:
             self._pump()
 
     def _next_packet(self) -> bytes | None:
@@ -287,26 +310,28 @@ class SabertoothBus(Bus):
                 oldest = key
         oldest_age = now - self._sent_at.get(oldest, -1e18) if oldest is not None else 0.0
         if oldest is not None and oldest_age >= self.urgent_age:
-            pkt = self._pending.pop(oldest, None)
-            if pkt is None:
-                pkt = self._sent[oldest]
-                self.stats["refreshes"] += 1
-            return self._mark_sent(oldest, pkt)
+            if self._pending.pop(oldest, 0) is None:
+                return self._mark_sent(oldest, self._channels[oldest].packet())
+            self.stats["refreshes"] += 1
+            return self._mark_sent(oldest, self._sent[oldest])
         if self._pending:
             key = next(iter(self._pending))
-            return self._mark_sent(key, self._pending.pop(key))
+            del self._pending[key]
+            return self._mark_sent(key, self._channels[key].packet())
         if oldest is not None and oldest_age >= self.refresh_period:
             self.stats["refreshes"] += 1
             return self._mark_sent(oldest, self._sent[oldest])
         for address, at in self._programmed_at.items():
             if now - at >= REPROGRAM_PERIOD_S:
                 self._programmed_at[address] = now
+                self._due_at = -math.inf
                 return codec.encode_timeout(address, self.timeout_s)
         return None
 
     def _mark_sent(self, key: Key, pkt: bytes) -> bytes:
         self._sent[key] = pkt
         self._sent_at[key] = self._now
+        self._due_at = -math.inf
         return pkt
 
     def _pump(self) -> None:
@@ -338,7 +363,7 @@ class SabertoothBus(Bus):
                     self.stats["short_writes"] += 1
                     return
         except DeviceError as exc:
-            self._failure = exc
+            self.failure = exc
 
     def _something_due(self) -> bool:
         now = self._now
@@ -409,8 +434,8 @@ class SabertoothBus(Bus):
             if readable:
                 self._ser.read(256)
         except (serial.SerialException, OSError, ValueError) as exc:
-            self._failure = DeviceError(self.name, f"{self.port} vanished: {exc}")
-            raise self._failure from exc
+            self.failure = DeviceError(self.name, f"{self.port} vanished: {exc}")
+            raise self.failure from exc
 
 
 def _release(ser: Any) -> None:

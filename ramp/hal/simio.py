@@ -24,7 +24,11 @@ from ramp.schema import Field
 
 
 class SimWorld(Protocol):
-    """What a simulated world offers the sim driver; signals are named `module.device`."""
+    """What a simulated world offers the sim driver; signals are named `module.device`.
+
+    A world may also have an int `revision` that moves on whenever what it reads back may
+    have changed (the MARTE model: each step); the driver then samples only when it moved.
+    Without one, every tick samples."""
 
     def set_motor(self, name: str, duty: float) -> None: ...
     def read_analog(self, name: str) -> float: ...
@@ -34,54 +38,53 @@ class SimWorld(Protocol):
     def bus_present(self, bus: str) -> bool: ...
 
 
-class _Motor(MotorChannel):
-    def _apply(self, duty: float) -> None:
-        bus = self.bus
-        assert isinstance(bus, SimBus)
-        if bus.is_open:
-            bus.world.set_motor(self.label, duty)
+class _Input:
+    """An input signal: `value` is the sample the bus's last tick took from the world."""
+
+    value: Any
+    read_world: str  # the SimWorld method that samples it
+
+    def sample(self, world: SimWorld) -> None:
+        self.value = getattr(world, self.read_world)(self.label)  # type: ignore[attr-defined]
 
 
-class _Analog(AnalogInput):
+class _Analog(_Input, AnalogInput):
+    read_world = "read_analog"
+    value = 0.0
+
     def read(self) -> float:
-        bus = self.bus
-        assert isinstance(bus, SimBus)
-        return bus.world.read_analog(self.label)
+        return float(self.value)
 
 
-class _DigitalIn(DigitalInput):
+class _DigitalIn(_Input, DigitalInput):
+    read_world = "read_digital"
+    value = False
+
     def read(self) -> bool:
-        bus = self.bus
-        assert isinstance(bus, SimBus)
-        return bus.world.read_digital(self.label)
+        return bool(self.value)
 
 
-class _DigitalOut(DigitalOutput):
-    def _apply(self, on: bool) -> None:
-        bus = self.bus
-        assert isinstance(bus, SimBus)
-        if bus.is_open:
-            bus.world.write_digital(self.label, on)
+class _Bridge(_Input, BridgeInput):
+    read_world = "read_bridge"
+    value = 0.0
 
-
-class _Bridge(BridgeInput):
     def read(self) -> float:
-        bus = self.bus
-        assert isinstance(bus, SimBus)
-        return bus.world.read_bridge(self.label)
+        return float(self.value)
 
 
 _CLASSES: dict[str, type] = {
-    "motor": _Motor, "analog_in": _Analog, "digital_in": _DigitalIn,
-    "digital_out": _DigitalOut, "bridge_in": _Bridge,
+    "motor": MotorChannel, "analog_in": _Analog, "digital_in": _DigitalIn,
+    "digital_out": DigitalOutput, "bridge_in": _Bridge,
 }
 
 
 class SimBus(Bus):
     """A bus whose channels are signals of a simulated world.
 
-    When it stands in for a real driver under `--sim`, the device entries keep their real
-    channel keys (address, channel, ...); this driver ignores them and wires by label.
+    When it stands in for a real driver under `--sim`, the bus and device entries keep their
+    real keys (port, address, channel, ...); this driver ignores them and wires by label.
+    Inputs are sampled from the world in `tick` (and at open), as a real board's samples
+    arrive, so readings change only inside a tick.
     """
 
     driver_name = "sim"
@@ -93,19 +96,44 @@ class SimBus(Bus):
         if world is None:
             raise DeviceError(name, "the sim driver runs only under `ramp run --sim`")
         self.world = world
+        self.inputs: list[_Input] = []
+        self._sampled: int | None = None  # the world's revision the inputs hold
 
     def _make_channel(self, kind: str, label: str, spec: dict[str, Any]) -> Any:
-        return _CLASSES[kind](self, label)
+        ch = _CLASSES[kind](self, label)
+        if isinstance(ch, _Input):
+            self.inputs.append(ch)
+        return ch
 
     def _open(self, now: float) -> None:
         if not self.world.bus_present(self.name):
             raise DeviceError(self.name, "simulated device unplugged")
+        self._sampled = None
         for m in self.motors:
             self.world.set_motor(m.label, m.duty)
+        for o in self.outputs:
+            self.world.write_digital(o.label, o.state)
+        self._sample()
 
     def _tick(self, now: float, dt: float) -> None:
         if not self.world.bus_present(self.name):
             raise DeviceError(self.name, "simulated device unplugged")
+        self._sample()
+
+    def _sample(self) -> None:
+        world = self.world
+        revision = getattr(world, "revision", None)
+        if revision is not None and revision == self._sampled:
+            return
+        for ch in self.inputs:
+            ch.sample(world)
+        self._sampled = revision
+
+    def _motor_changed(self, ch: MotorChannel) -> None:
+        self.world.set_motor(ch.label, ch.duty)
+
+    def _output_changed(self, ch: DigitalOutput) -> None:
+        self.world.write_digital(ch.label, ch.state)
 
     def _stop_motors(self) -> None:
         for m in self.motors:

@@ -4,19 +4,33 @@ Every client builds its picture of the robot from these rows, never from tables 
 `ramp-shell` its completion and help, the teleop console its tree and panels. Rows that do
 not fit the describe format are skipped rather than fatal: a newer robot may say more than a
 client understands, and the rest is still worth showing.
+
+Each function's kind comes from describe too (`MODULE:DEVICE.kind=(FUNCTION,KIND)`: `motion`,
+`stop`, `state`, `read` or `control`), so a client knows what moves the robot without
+guessing from names; `Catalog.kind_of` falls back to a guess only for a robot that does not
+publish kinds.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from ramp.mcp.messages import Response, Value
 from ramp.mcp.protocol import format_value
 
-#: Functions that only read: `watch` re-polls these and nothing else, so it can never move
-#: the robot, and `hold` refuses a message made of these alone.
+#: Functions that only read, by name: the guess for a robot that does not publish kinds.
 READ_FUNCTIONS = frozenset({"get", "describe", "modules"})
+#: The kinds a robot publishes (SPEC 2.2 `describe`; see the README).
+KINDS = ("motion", "stop", "state", "read", "control")
+
+
+def guess_kind(function: str) -> str:
+    """A function's kind from its name alone (a robot that publishes no kinds): reads and
+    stops are known by name; anything else may move the robot."""
+    if function in READ_FUNCTIONS:
+        return "read"
+    return "stop" if function == "stop" else "motion"
 
 
 @dataclass(frozen=True)
@@ -27,6 +41,9 @@ class FunctionInfo:
     device: str
     name: str
     params: tuple[str, ...] = ()
+    #: What it does, as describe says (`motion`, `stop`, `state`, `read`, `control`); ""
+    #: when the robot did not say.
+    kind: str = ""
 
     @property
     def hint(self) -> str:
@@ -76,6 +93,17 @@ class Catalog:
             if fn.device == device and fn.name == name:
                 return fn
         return None
+
+    def kind_of(self, module: str, device: str, function: str) -> str:
+        """What a request does, as describe said, or guessed from its name when the robot
+        did not say (or the function is unknown)."""
+        fn = self.function(module, device, function)
+        if fn is not None and fn.kind:
+            return fn.kind
+        return guess_kind(function)
+
+    def is_read(self, module: str, device: str, function: str) -> bool:
+        return self.kind_of(module, device, function) == "read"
 
     def unit(self, module: str, device: str, prop: str) -> str:
         """The unit describe gave for a get row, or "" where there is none or it is unknown."""
@@ -134,6 +162,10 @@ def _add_rows(cat: Catalog, module: str, rows: Iterable[Response]) -> None:
             info = FunctionInfo(module, r.device, values[0], values[1:])
             if info not in functions:
                 functions.append(info)
+        elif r.prop == "kind" and len(values) == 2 and values[1] in KINDS:
+            for i, f in enumerate(functions):
+                if f.device == r.device and f.name == values[0]:
+                    functions[i] = replace(f, kind=values[1])
         elif r.prop == "property":
             typ = values[1] if len(values) > 1 else ""
             unit = values[2] if len(values) > 2 else ""

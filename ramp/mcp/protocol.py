@@ -366,6 +366,13 @@ class LineSplitter:
         """Add received bytes; return every message they complete, in order."""
         if not isinstance(data, bytes):
             data = bytes(data)
+        if not self._buf and not self._discarding and len(data) <= self.max_line:
+            # The server's usual case: whole messages, nothing held. No message can be too
+            # long, so a split does it (the same messages the general walk below finds).
+            lines = data.split(b"\n")
+            if lines[-1]:
+                self._buf += lines[-1]
+            return [m[:-1] if m[-1:] == b"\r" else m for m in lines[:-1]]
         out: list[bytes | TooLong] = []
         buf = self._buf
         limit = self.max_line

@@ -1,10 +1,11 @@
 """The backend in a simulation rig: a real `Supervisor` moving the rig's `MarteWorld`.
 
-`ramp run --sim` in-process, on the rig's virtual clock: `ramp.sim.SimBackplane` puts every
-bus on its emulator (the Sabertooths behind ptys, the Phidget boards at the HAL) and steps the
-world first in every tick, and the supervisor serves MCP on a loopback port. An autonomy then
-talks to it over real TCP (`ramp.autonomy.mcp_link.McpLink`) from tasks on the same
-scheduler, so a whole mission runs in one thread on one clock, deterministically.
+`ramp run --sim` in-process, on the rig's virtual clock: the backplane
+(`ramp.simulation.backplane.SimBackplane`) puts every bus on its emulator (the Sabertooths
+behind ptys, the Phidget boards at the HAL) and steps the world first in every tick, and
+the supervisor serves MCP on a loopback port. An autonomy then talks to it over real TCP
+(`ramp.autonomy.mcp_link.McpLink`) from tasks on the same scheduler, so a whole mission runs
+in one thread on one clock, deterministically.
 
 This is simulation glue (it imports the backend); the autonomy never imports it.
 """
@@ -17,9 +18,9 @@ from firmware_like.marte import MarteWorld
 from ramp.clock import Clock, VirtualClock
 from ramp.config import Config, check_config
 from ramp.errors import ConfigErrors
+from ramp.runtime import build
 from ramp.scheduler import Scheduler
-from ramp.sim import SimBackplane
-from ramp.supervisor import Supervisor
+from ramp.simulation.backplane import SimBackplane
 
 #: The repository's MARTE wiring, what `ramp run --sim` uses by default.
 DEFAULT_RAMP_YAML = Path(__file__).resolve().parents[2] / "ramp.yaml"
@@ -46,9 +47,8 @@ class SimBackend:
         self.clock: Clock = clock if clock is not None else VirtualClock()
         self.config = config if isinstance(config, Config) else load_backend_config(config)
         self.backplane = SimBackplane(self.config, world, wire_level=wire_level)
-        self.supervisor = Supervisor(self.config, self.clock,
-                                     bus_factory=self.backplane.bus_factory, host="127.0.0.1",
-                                     port=port)
+        self.supervisor = build(self.config, self.clock, self.backplane.bus_factory,
+                                host="127.0.0.1", port=port)
         self.backplane.attach(self.supervisor)
         self.supervisor.start()
         self.supervisor.settle()

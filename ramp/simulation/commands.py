@@ -80,10 +80,12 @@ def add_perceive_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]
     p = sub.add_parser(
         "perceive", help="localize and detect obstacles from one pose, on the emulated sensors",
         description="Place the robot, let the AHRS settle and the gimbal level the LIDAR, "
-                    "localize from level scans (re-levelling from the scan when lost), sweep "
-                    "the LIDAR's tilt for a 3D scan and detect rocks and craters: the real "
-                    "drivers on the emulators, on a virtual clock. Prints the estimated pose "
-                    "with its confidence and the obstacles found.")
+                    "localize from level scans, sweep the LIDAR's tilt stop and go for a 3D "
+                    "scan, check level against the scan and the floor (re-levelling and "
+                    "localizing again when the IMU has moved) and detect rocks and craters: "
+                    "the real drivers on the emulators, on a virtual clock. Prints the "
+                    "estimated pose with its confidence (or LOST and why) and the obstacles "
+                    "found.")
     where = p.add_argument_group("world (the SPEC 6.1 arena)")
     where.add_argument("--world", metavar="FILE",
                        help="world file (YAML: start, rocks, craters); default: a seeded layout")
@@ -284,7 +286,6 @@ def _perceive(args: argparse.Namespace) -> int:
     from firmware_like.world_file import WorldFileError, load_world
 
     try:
-        from ramp.autonomy.perception.pipeline import PerceptionUnavailable
         from ramp.errors import ConfigErrors
         from ramp.simulation.perceive import PerceiveError, perceive
         from ramp.simulation.rig import load_autonomy_config
@@ -316,7 +317,7 @@ def _perceive(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.ERROR, format="%(levelname)s %(name)s: %(message)s")
     try:
         result = perceive(world, config, seed=seed, fault=args.fault, hint=args.hint)
-    except (PerceptionUnavailable, PerceiveError) as exc:
+    except PerceiveError as exc:
         print(f"ramp sim perceive: {exc}", file=sys.stderr)
         return 1
     if args.plot:
@@ -324,8 +325,10 @@ def _perceive(args: argparse.Namespace) -> int:
             from ramp.simulation.perceive_plot import draw_perception
         except ImportError as exc:
             raise UsageError("--plot needs matplotlib: pip install 'ramp[plot]'") from exc
+        where = layout.source if layout.source == f"seed {seed}" else (
+            f"{layout.source}, seed {seed}")
         draw_perception(world, result, args.plot, title=(
-            f"{layout.source}, seed {seed}: robot at x {x:g} y {y:g} yaw {yaw:g}°, "
+            f"{where}: robot at x {x:g} y {y:g} yaw {yaw:g}°, "
             f"hint {args.hint or 'none'}, fault {args.fault}"))
     doc = result.to_json(world=layout.source, seed=seed, fault=args.fault, hint=args.hint,
                          plot=args.plot)
@@ -342,9 +345,12 @@ def describe_perception(doc: dict[str, Any]) -> list[str]:
     def pose(p: dict[str, Any]) -> str:
         return f"x {p['x']:.3f} y {p['y']:.3f} yaw {p['yaw']:.1f} deg"
 
-    out = [f"{doc['world']}: seed {doc['seed']}, fault {doc['fault']}, "
-           f"hint {doc['hint'] or 'none'}"]
+    where = doc["world"] if doc["world"] == f"seed {doc['seed']}" else (
+        f"{doc['world']}: seed {doc['seed']}")
+    out = [f"{where}, fault {doc['fault']}, hint {doc['hint'] or 'none'}"]
     out.append(f"  true pose:      {pose(doc['true_pose'])}")
+    if doc["moved_off"]:
+        out.append(f"  note: {doc['moved_off']}")
     if doc["lost"] or doc["pose"] is None:
         out.append(f"  estimated pose: LOST ({doc['reason'] or 'no reason given'})")
     else:
@@ -352,8 +358,12 @@ def describe_perception(doc: dict[str, Any]) -> list[str]:
                    f"{doc['pose']['confidence']:.2f})")
     if len(doc["candidates"]) > 1:
         out.append("  candidates:     " + "; ".join(pose(c) for c in doc["candidates"]))
-    if doc["relevels"]:
-        out.append(f"  re-levelled {doc['relevels']} time(s) from the scan")
+    for fix in doc["level_fixes"]:
+        out.append(f"  re-levelled from the {fix['from']} at {fix['t']:.1f} s: the IMU's level "
+                   f"was {fix['deg']:.1f} deg off")
+    if doc["retakes"]:
+        out.append(f"  scanned and localized again {doc['retakes']} time(s): the AHRS "
+                   "corrected its IMU mount meanwhile")
     if doc["imu"]["suspect"]:
         out.append(f"  IMU suspect: {doc['imu']['reason']}")
     out.append(f"  obstacles ({len(doc['obstacles'])} detected, "
@@ -362,7 +372,8 @@ def describe_perception(doc: dict[str, Any]) -> list[str]:
         out.append(f"    {o['kind']:6s} at x {o['x']:.2f} y {o['y']:.2f}, d {o['d']:.2f} m")
     if doc["sweep_note"]:
         out.append(f"  sweep: {doc['sweep_note']}")
-    out.append(f"  {doc['scans']} level scans, {doc['sweep_scans']} sweep scans; "
+    side = f" (+{doc['side_scans']} to the sides)" if doc["side_scans"] else ""
+    out.append(f"  {doc['scans']} level scans, {doc['sweep_scans']} sweep scans{side}; "
                f"{doc['sim_time_s']:.1f} s simulated in {doc['wall_time_s']:.1f} s")
     if doc.get("plot"):
         out.append(f"  plot written to {doc['plot']}")

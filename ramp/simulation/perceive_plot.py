@@ -4,9 +4,10 @@ obstacle map (as figure 5.40), side by side.
 Left: the level scan laid into the arena from every candidate pose the localizer kept (the
 symmetric arena allows two to four), the chosen one bold, the others faint, beside the true
 pose; a scan that fits its pose draws the walls. Right: the arena map with the 3D sweep's
-returns (coloured by height: rocks warm, craters cool), the true obstacles as outlines and
-the detected ones filled, each with its diameter. matplotlib is an optional extra (`plot`);
-it is imported only here.
+returns as the detector saw them (coloured by height above the ground it fitted: rocks warm,
+craters cool; walls and the robot's own frame left out), the true obstacles as dashed
+outlines and the detected ones filled, each with its diameter. matplotlib is an optional
+extra (`plot`); it is imported only here.
 """
 
 from __future__ import annotations
@@ -85,51 +86,66 @@ def _footprint(ax: Axes, world: MarteWorld, x: float, y: float, yaw: float, colo
                 zorder=6)
 
 
+def _same(a: PoseEstimate, b: PoseEstimate) -> bool:
+    return (math.hypot(a.x - b.x, a.y - b.y) < 0.01
+            and abs(math.remainder(a.yaw - b.yaw, 2 * math.pi)) < math.radians(1.0))
+
+
 def _localization(ax: Axes, world: MarteWorld, result: PerceiveResult) -> None:
+    from ramp.autonomy.perception.pipeline import fuse_scans
+
     loc = result.localization
     candidates: list[PoseEstimate] = list(loc.candidates)
-    if loc.pose is not None and not any(c == loc.pose for c in candidates):
-        candidates.insert(0, loc.pose)
-    record = result.level_records[-1] if result.level_records else None
+    chosen = loc.pose if not loc.lost else None
+    if chosen is not None and not any(_same(c, chosen) for c in candidates):
+        candidates.insert(0, chosen)
+    record = fuse_scans(result.level_records)[0] if result.level_records else None
     for i, c in enumerate(candidates[:len(CANDIDATE_COLOURS)]):
-        chosen = loc.pose is not None and not loc.lost and c == loc.pose
+        is_chosen = chosen is not None and _same(c, chosen)
         colour = CANDIDATE_COLOURS[i]
-        alpha = 1.0 if chosen else 0.45
+        alpha = 1.0 if is_chosen else 0.45
         if record is not None:
             pts = record.points_arena(c.x, c.y, c.yaw)
-            ax.scatter(pts[:, 0], pts[:, 1], s=2.5 if chosen else 1.5, color=colour,
+            ax.scatter(pts[:, 0], pts[:, 1], s=2.5 if is_chosen else 1.5, color=colour,
                        alpha=alpha, zorder=5)
-        what = "chosen" if chosen else "candidate"
-        _footprint(ax, world, c.x, c.y, c.yaw, colour, lw=2.0 if chosen else 1.0, alpha=alpha,
-                   label=f"{what}: x {c.x:.2f} y {c.y:.2f} yaw {math.degrees(c.yaw):.1f}° "
-                         f"(conf {c.confidence:.2f})")
+        what = (f"chosen (confidence {chosen.confidence:.2f})" if is_chosen and chosen
+                else f"candidate (p {c.confidence:.2f})")
+        _footprint(ax, world, c.x, c.y, c.yaw, colour, lw=2.0 if is_chosen else 1.0,
+                   alpha=alpha, label=f"{what}: x {c.x:.2f} y {c.y:.2f} "
+                                      f"yaw {math.degrees(c.yaw):.1f}°")
     tx, ty, tyaw = result.true_pose
     _footprint(ax, world, tx, ty, tyaw, "#000000", lw=1.0, ls="--", label="true pose")
     if loc.lost:
-        ax.text(0.5, 0.5, f"LOST: {loc.reason}", transform=ax.transAxes, ha="center",
-                va="center", fontsize=12, color="#d62728",
+        ax.text(0.5, 0.5, f"LOST: {_wrap(loc.reason)}", transform=ax.transAxes, ha="center",
+                va="center", fontsize=10, color="#d62728",
                 bbox={"facecolor": "white", "alpha": 0.85, "edgecolor": "#d62728"})
     ax.legend(loc="lower right", fontsize=7.5, framealpha=0.9)
-    hint = f", {result.relevels} re-level(s)" if result.relevels else ""
-    ax.set_title(f"Localization: the level scan from each candidate pose{hint}", fontsize=10)
+    fixes = "".join(f", re-levelled from the {f.source} ({f.deg:.1f}°)"
+                    for f in result.level_fixes)
+    if result.retakes:
+        fixes += ", scanned again after the IMU moved"
+    ax.set_title(f"Localization: the level scan laid in from each candidate pose{fixes}",
+                 fontsize=10)
+
+
+def _wrap(text: str, width: int = 70) -> str:
+    import textwrap
+
+    return "\n".join(textwrap.wrap(text, width))
 
 
 def _obstacles(ax: Axes, world: MarteWorld, result: PerceiveResult) -> None:
     from matplotlib.patches import Circle
 
     pose = result.localization.pose
-    if pose is not None and result.sweep_records:
-        pts = np.concatenate([r.points_arena(pose.x, pose.y, pose.yaw)
-                              for r in result.sweep_records])
-        inside = ((pts[:, 0] > 0.02) & (pts[:, 0] < world.params.arena_length - 0.02)
-                  & (pts[:, 1] > 0.02) & (pts[:, 1] < world.params.arena_width - 0.02))
-        pts = pts[inside][::3]
-        ground = world.terrain.height(pts[:, 0], pts[:, 1]) if len(pts) else pts[:, 2]
-        rel = pts[:, 2] - np.asarray(ground)
-        sc = ax.scatter(pts[:, 0], pts[:, 1], c=np.clip(rel, -0.15, 0.15), s=0.6,
+    det = result.detection
+    if pose is not None and det is not None and len(det.cloud):
+        pts, h = det.cloud.points, det.heights
+        shown = np.isfinite(h) & (np.arange(len(h)) % 3 == 0)
+        sc = ax.scatter(pts[shown, 0], pts[shown, 1], c=np.clip(h[shown], -0.15, 0.15), s=0.6,
                         cmap="coolwarm", vmin=-0.15, vmax=0.15, zorder=3, rasterized=True)
         ax.figure.colorbar(sc, ax=ax, shrink=0.6, pad=0.01,
-                           label="sweep return above the true ground (m)")
+                           label="return above the ground the robot fitted (m)")
         _footprint(ax, world, pose.x, pose.y, pose.yaw, "#1f5fbf", label="estimated pose")
     for o in result.true_obstacles:
         ax.add_patch(Circle((o.x, o.y), o.d / 2, fill=False, edgecolor=KIND_COLOURS[o.kind],
@@ -146,5 +162,5 @@ def _obstacles(ax: Axes, world: MarteWorld, result: PerceiveResult) -> None:
     ax.scatter([], [], marker="o", color=KIND_COLOURS["crater"], label="detected crater")
     ax.legend(loc="lower right", fontsize=7.5, framealpha=0.9)
     n = len(result.sweep_records)
-    ax.set_title(f"Obstacles: {len(result.obstacles)} detected from a {n}-scan sweep "
-                 f"({len(result.true_obstacles)} in the world)", fontsize=10)
+    ax.set_title(f"Obstacles: {len(result.obstacles)} detected from a {n}-scan stop-and-go "
+                 f"sweep ({len(result.true_obstacles)} in the world)", fontsize=10)

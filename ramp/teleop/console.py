@@ -43,12 +43,15 @@ def call_text(target: str, params: str) -> str:
     return f"{target}=({','.join(parts)})"
 
 
-def is_motion(r: Request) -> bool:
-    """A request that may set something moving on a module (and so needs a stop later).
-
-    Reads and stops never do; robot-level requests (watchdog, control) move nothing.
-    """
-    return r.module != "robot" and r.function not in READ_FUNCTIONS and r.function != "stop"
+def is_motion(r: Request, catalog: Catalog | None = None) -> bool:
+    """A request that may set something moving on a module (and so needs a stop later): its
+    kind as the robot's describe says (`motion`), or, for a robot that does not say, any
+    request that is neither a read nor a stop. Robot-level requests move nothing."""
+    if r.module == "robot":
+        return False
+    if catalog is not None:
+        return catalog.kind_of(r.module, r.device, r.function) == "motion"
+    return r.function not in READ_FUNCTIONS and r.function != "stop"
 
 
 def refused_modules(requests: list[Request], responses: list[Response]) -> set[str]:
@@ -233,7 +236,7 @@ class Console:
                 self.controller.interrupted(self.now(), "robot stopped")
             else:
                 self.controller.forget([request.module])
-        elif is_motion(request) and not refused:
+        elif is_motion(request, self.poller.catalog) and not refused:
             self.controller.commanded(page, [request.module], self.now())
 
     async def control(self, page: str, action: str) -> None:

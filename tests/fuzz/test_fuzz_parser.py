@@ -16,7 +16,7 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from ramp.layers.robot import Client
+from ramp.layers.robot_distribution import Client
 from ramp.mcp.messages import Response, clean_detail
 from ramp.mcp.protocol import (
     LineSplitter,
@@ -73,9 +73,8 @@ def marte() -> Iterator[SimHarness]:
 
 
 def answer(h: Harness, client: Client, msg: bytes | TooLong) -> bytes:
-    """What the server writes for one message: the supervisor's handler, then the codec."""
-    steps = h.sup.server.handler(client, msg)  # type: ignore[arg-type]
-    return format_responses([r for part in steps for r in part])
+    """What the server writes for one message (parsed, handed down, answered in one line)."""
+    return h.sup.server.answer_message(client, msg)
 
 
 def ask(h: Harness, client: Client, text: str) -> str:
@@ -343,6 +342,8 @@ def valid_token(kind: str) -> st.SearchStrategy[str]:
 
 
 MARTE_CLIENT = Client("marte")
+#: The kinds describe publishes (README, "Talking to the robot").
+SPEC_KINDS = ("motion", "stop", "state", "read", "control")
 
 
 @fuzz_settings(0.3)
@@ -372,7 +373,10 @@ def test_marte_tables_survive_anything(marte: SimHarness, data: st.DataObject) -
                 continue
             kind = types.get((r.module, r.device, r.prop))
             if kind is None:  # describe and robot.modules rows; every get row is described
-                assert r.prop in ("function", "property", "module", "modules"), r
+                assert r.prop in ("function", "property", "module", "modules", "kind"), r
+            if r.prop == "kind":  # a function's kind: a function describe lists, a known kind
+                assert len(r.values) == 2 and r.values[1] in SPEC_KINDS, r
+                assert any(f[:3] == (r.module, r.device, r.values[0]) for f in functions), r
             if kind == "int":
                 assert all(type(v) is int for v in r.values), r
             elif kind == "float":

@@ -24,7 +24,7 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from ramp.layers.module import Property
+from ramp.layers.module_distribution import Property
 from ramp.mcp.protocol import parse_response_line
 from tests.fuzz import (
     DemoOracle,
@@ -312,14 +312,15 @@ def test_flood_is_served_in_small_turns(h: Harness) -> None:
     conn = next(c for c in server.clients.values() if c.peer.endswith(
         str(flood.sock.getsockname()[1])))
     seen: list[int] = []
-    real = server.handler
+    robot = h.sup.robot
+    real = robot.message  # every complete message is handed down here first, once
 
-    def counting(c: object, msg: object) -> object:
-        if c is conn:
+    def counting(ctx: Any) -> None:
+        if ctx.client is conn:
             seen[-1] += 1
-        return real(c, msg)  # type: ignore[arg-type]
+        real(ctx)
 
-    server.handler = counting  # type: ignore[assignment]
+    robot.message = counting  # type: ignore[method-assign]
     try:
         for _ in range(20):
             seen.append(0)
@@ -334,7 +335,7 @@ def test_flood_is_served_in_small_turns(h: Harness) -> None:
         assert sum(seen) == 65536
         assert drain(h, flood, 65536) == [b"\n"] * 65536
     finally:
-        server.handler = real
+        robot.message = real  # type: ignore[method-assign]
 
 
 def test_memory_stays_bounded_under_garbage(h: Harness) -> None:

@@ -75,7 +75,7 @@ def test_the_copy_is_what_python_imports(tree: Path) -> None:
 def test_ramp_check_the_shell_and_ramp_sim_lidar_work_without_it(tree: Path) -> None:
     check = run(tree, "-m", "ramp.cli", "check", "ramp.yaml")
     assert check.returncode == 0 and "ramp.yaml: ok" in check.stdout, check.stderr
-    shell = run(tree, "-c", "import ramp.shell, ramp.shell_complete, ramp.shell_render")
+    shell = run(tree, "-c", "import ramp.shell, ramp.shell.complete, ramp.shell.render")
     assert shell.returncode == 0, shell.stderr
     lidar = run(tree, "-m", "ramp.cli", "sim", "lidar", "--seed", "1", "--at", "1.0,1.0,0",
                 "--json")

@@ -20,7 +20,7 @@ import pytest
 
 from ramp.clock import VirtualClock
 from ramp.hal.simio import SimBus
-from ramp.supervisor import Supervisor
+from ramp.runtime import build
 from tests.harness import DEMO_YAML, FakeWorld, config_from
 
 #: Every request costs at least this much: a line of them takes 15-25 ms, two 10 ms ticks.
@@ -49,11 +49,11 @@ class Rig:
         self.clock = CostClock()
         self.world = FakeWorld()
         yaml = DEMO_YAML.replace("timeout: 0.5", "timeout: 0.3")
-        self.sup = Supervisor(config_from(yaml), self.clock, host="127.0.0.1", port=0,
+        self.sup = build(config_from(yaml), self.clock, host="127.0.0.1", port=0,
                               bus_factory=lambda bc: SimBus(bc.name, dict(bc.params),
                                                             world=self.world))
         self.sup.start()
-        one = self.sup.robot._one
+        one = self.sup.robot.request
 
         def charged(*args: object) -> object:  # a request costs at least FLOOR_S
             t0 = time.thread_time()
@@ -63,7 +63,7 @@ class Rig:
                 self.clock.advance(FLOOR_S - spent)
             return out
 
-        self.sup.robot._one = charged  # type: ignore[method-assign]
+        self.sup.robot.request = charged  # type: ignore[method-assign]
         self.clients: list[Client] = []
 
     def connect(self) -> Client:

@@ -22,8 +22,8 @@ import pytest
 
 from ramp.clock import MonotonicClock, VirtualClock
 from ramp.hal.simio import SimBus
+from ramp.runtime import build
 from ramp.scheduler import Scheduler
-from ramp.supervisor import Supervisor
 from tests.harness import DEMO_YAML, MARTE_YAML, REPO, FakeWorld, config_from
 from tests.harness import ask_line as ask
 
@@ -134,7 +134,7 @@ class OutOfDescriptors:
 def test_emfile_on_accept_backs_off_instead_of_spinning(
         caplog: pytest.LogCaptureFixture) -> None:
     world = FakeWorld()
-    sup = Supervisor(config_from(DEMO_YAML), MonotonicClock(), host=HOST, port=0,
+    sup = build(config_from(DEMO_YAML), MonotonicClock(), host=HOST, port=0,
                      bus_factory=lambda bc: SimBus(bc.name, dict(bc.params), world=world))
     sup.start()
     server = sup.server

@@ -16,33 +16,21 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
 
 from ramp.autonomy.mcp_link import McpLink
-from ramp.autonomy.perception import pipeline
 from ramp.cli import main
 from ramp.mcp.session import Reply
 from ramp.simulation.campaign import combination
 from ramp.simulation.mission import MissionOptions, MissionRun
 from ramp.simulation.referee import referee
-from tests.unit import pipeline_adapter
 
 SUMMARY_FIELDS = ("outcome", "delivered_kg", "sim_time_s", "wall_time_s", "collisions",
                   "crater_entries", "states_visited", "localization_losses", "seed",
                   "start_box", "heading", "fault")
-
-
-@pytest.fixture(autouse=True)
-def perception(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
-    """`pipeline.py`'s two calls through the real localizer and detector: the pipeline is
-    wired to them elsewhere; until then the adapter of the same signatures stands in."""
-    monkeypatch.setattr(pipeline, "localize", pipeline_adapter.localize)
-    monkeypatch.setattr(pipeline, "detect_obstacles", pipeline_adapter.detect)
-    yield
 
 
 @pytest.mark.timeout(300)

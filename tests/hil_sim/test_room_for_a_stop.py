@@ -56,7 +56,7 @@ def test_a_newcomer_evicts_the_longest_silent_idle_client_and_can_stop_the_robot
     early = h.connect()  # nobody has been silent for 5 s yet
     assert closed_after_busy(early) == "robot:mcp.error=(busy,too many clients; at most 4)"
     drive_for(h, driver, 4.5)  # idle[0] and idle[2]: 5.5 s of silence; idle[1]: 4.5 s
-    with caplog.at_level(logging.WARNING, logger="ramp.server"):
+    with caplog.at_level(logging.WARNING, logger="ramp.layers.server"):
         operator = h.connect()
     assert closed_after_busy(idle[0]).startswith(
         "robot:mcp.error=(busy,closed to make room for another client: no message for 5 s")

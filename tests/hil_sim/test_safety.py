@@ -15,8 +15,8 @@ from firmware_like.pty_link import PtyLink
 from firmware_like.sabertooth import SabertoothEmulator, SabertoothPtyDevice
 from ramp.clock import MonotonicClock
 from ramp.hal.simio import SimBus
-from ramp.stall_guard import StallGuard
-from ramp.supervisor import Supervisor
+from ramp.runtime import build
+from ramp.runtime.stall_guard import StallGuard
 from tests.harness import DEMO_YAML, MARTE_YAML, FakeWorld, config_from
 from tests.harness import ask_line as ask
 from tests.harness import start_ramp as start
@@ -37,7 +37,7 @@ class RecordingWorld(FakeWorld):
 def test_a_stalled_task_has_its_motors_stopped_and_is_named(
         caplog: pytest.LogCaptureFixture) -> None:
     world = RecordingWorld()
-    sup = Supervisor(config_from(DEMO_YAML), MonotonicClock(),
+    sup = build(config_from(DEMO_YAML), MonotonicClock(),
                      bus_factory=lambda bc: SimBus(bc.name, dict(bc.params), world=world),
                      host="127.0.0.1", port=0)
     sup.start()
@@ -157,7 +157,7 @@ def test_the_stall_guard_never_writes_through_a_driver_the_loop_is_inside(
         buses[name] = bus
         return bus
 
-    sup = Supervisor(config_from(DEMO_YAML), MonotonicClock(), bus_factory=factory,
+    sup = build(config_from(DEMO_YAML), MonotonicClock(), bus_factory=factory,
                      host="127.0.0.1", port=0)
     sup.start()
     guard = StallGuard(sup, limit=0.1)

@@ -20,8 +20,8 @@ REPO = Path(__file__).resolve().parents[2]
 RAMP = REPO / "ramp"
 
 #: What the autonomy must never import (SPEC 6; the brief's list), nor the simulator.
-BACKEND = ("ramp.layers", "ramp.functional", "ramp.hal", "ramp.server", "ramp.supervisor",
-           "ramp.config", "ramp.sim", "firmware_like")
+BACKEND = ("ramp.layers", "ramp.modules", "ramp.hal", "ramp.runtime", "ramp.config",
+           "ramp.simulation.backplane", "firmware_like")
 AUTONOMY = ("ramp.autonomy", "ramp.statemachine")
 #: Packages allowed to import the autonomy: itself, its state machine, the simulation glue.
 GLUE = ("autonomy", "statemachine", "simulation")

@@ -9,9 +9,9 @@ import pytest
 
 from ramp.errors import ConfigError, RequestError
 from ramp.hal.interfaces import AnalogInput, DigitalInput, DigitalOutput, MotorChannel
-from ramp.layers.base import BaseModule
-from ramp.layers.module import BoundDevice, Function
+from ramp.layers.module_distribution import BoundDevice, Function
 from ramp.mcp.messages import Request, Response
+from ramp.modules.base import BaseModule
 
 
 class FakeMotor(MotorChannel):

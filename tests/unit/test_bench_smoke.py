@@ -91,6 +91,13 @@ def test_figures_are_real_measurements_beside_baselines(smoke: dict[str, Any]) -
     assert rc["tick"]["on"]["written"] > 0 and rc["tick"]["on"]["ticks"] > 0
     assert rc["tick"]["slow_disk"]["late_us"]["p50"]["baseline"] > 0
 
+    pc = smoke["perception"]
+    for key in ("localize_ms", "detect_ms"):
+        assert pc[key]["p50"]["value"] > pc[key]["p50"]["baseline"] > 0
+    assert pc["sweep"]["cpu_s"]["p50"]["value"] > pc["sweep"]["cpu_s"]["p50"]["baseline"] > 0
+    assert 70 < pc["sweep_scans"] < 100 and pc["sweep"]["simulated_s"]["p50"] > 5.0
+    assert pc["flow"]["cpu_s"] > pc["flow"]["detect_cpu_s"] > 0
+
     st = smoke["startup"]
     assert st["start_to_ready_ms"]["median"]["value"] > st["start_to_ready_ms"]["median"][
         "baseline"] > 0

@@ -10,9 +10,9 @@ import pytest
 
 from ramp.errors import ConfigError, RequestError
 from ramp.hal.interfaces import AnalogInput, BridgeInput, MotorChannel
-from ramp.layers.ble import BleModule
-from ramp.layers.module import BoundDevice
+from ramp.layers.module_distribution import BoundDevice
 from ramp.mcp.messages import Request, Response
+from ramp.modules.ble import BleModule
 
 V0, V1 = 0.5, 4.5
 MOTORS = ("chain_left", "chain_right", "lift_motor")

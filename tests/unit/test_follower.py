@@ -20,7 +20,7 @@ from ramp.autonomy.planning import (
     plan_to_dock,
 )
 from ramp.autonomy.robot_model import MARTE, drive_command, wheel_mix
-from ramp.functional.base_drive import mix
+from ramp.layers.functional.base_drive import mix
 from ramp.simulation.referee import referee
 from tests.unit.rmc_layouts import random_layout, random_start, sampled_clearance
 

@@ -9,8 +9,8 @@ import random
 import pytest
 
 from ramp.errors import RequestError
-from ramp.functional import LoadCell, Motor, ThompsonActuator
 from ramp.hal.interfaces import AnalogInput, BridgeInput, MotorChannel
+from ramp.layers.functional import LoadCell, Motor, ThompsonActuator
 
 V0, V1 = 0.8, 4.2  # pot volts at retracted / extended
 

@@ -8,9 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ramp.functional import BaseDrive, BucketLadder, Motor, mix
-from ramp.functional.base_drive import round_half_away
 from ramp.hal.interfaces import MotorChannel
+from ramp.layers.functional import BaseDrive, BucketLadder, Motor, mix
+from ramp.layers.functional.base_drive import round_half_away
 
 
 class FakeMotor(MotorChannel):
@@ -86,11 +86,18 @@ def test_motor_deadband_sends_small_duties_as_zero() -> None:
     assert ch.duty == 0.0
 
 
-def test_motor_clamps_and_rejects_bad_polarity() -> None:
+def test_motor_refuses_an_unchecked_velocity_and_bad_polarity() -> None:
+    """The router validates every request; a velocity past 100 % reaching a motor is a bug
+    above, reported, never clamped into something that moves (issue: request path)."""
     ch = FakeMotor()
     m = Motor(ch)
-    m.set_velocity(250)
-    assert ch.duty == 1.0 and m.velocity == 100
+    m.set_velocity(60)
+    with pytest.raises(AssertionError):
+        m.set_velocity(250)
+    assert ch.duty == pytest.approx(0.6) and m.velocity == 60  # nothing changed
+    with pytest.raises(ValueError):
+        ch.set_duty(1.5)  # nor does the HAL clamp
+    assert ch.duty == pytest.approx(0.6)
     with pytest.raises(ValueError):
         Motor(ch, polarity=0)
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from ramp.functional import Button, Led, SystemVoltage, Voltage, VoltageDisplay
-from ramp.functional.voltage_display import PATTERN
 from ramp.hal.interfaces import AnalogInput, DigitalInput, DigitalOutput
+from ramp.layers.functional import Button, Led, SystemVoltage, Voltage, VoltageDisplay
+from ramp.layers.functional.voltage_display import PATTERN
 
 
 class FakeAnalog(AnalogInput):

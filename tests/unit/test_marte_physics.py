@@ -591,6 +591,7 @@ def test_drives_through_the_sim_driver() -> None:
     lf.set_duty(0.5)
     led.write(True)
     run(w, 1.0)
+    bus.tick(1.0, 0.01)  # inputs are sampled in the bus's tick, as a real board's arrive
     assert w.duty("base.lf_wheel") == 0.5
     assert w.wheel_speed("base.lf_wheel") > 0.1
     assert w.output("base.user_led") is True

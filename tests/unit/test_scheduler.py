@@ -152,3 +152,37 @@ def test_slower_tasks_keep_running_when_overruns_skip_ticks_unevenly() -> None:
     # every run tick at or past its slot, and the 1 Hz task once a second
     assert runs["50"] > 400
     assert 9 <= runs["1"] <= 11
+
+
+def test_below_descriptor_1024_the_wait_is_one_microsecond_select(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    """One wake-up per wait, as the bare loop (poll, which rounds to milliseconds, is only
+    used once a descriptor is past select's reach); a descriptor closed under the loop is
+    still found and dropped."""
+    import select
+    import time
+
+    import ramp.scheduler
+
+    s = Scheduler(VirtualClock(), 100)
+    a, b = socket.socketpair()
+    s.add_reader(a.fileno(), lambda: None)
+    asked: list[float] = []
+    real = select.select
+
+    def recording(r: object, w: object, x: object, timeout: float) -> object:
+        asked.append(timeout)
+        return real(r, w, x, timeout)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(ramp.scheduler.select, "select", recording)
+    t0 = time.perf_counter()
+    s.poll_io(0.0047)
+    assert time.perf_counter() - t0 >= 0.0045
+    assert asked == [0.0047]  # one select, the whole wait, to the microsecond
+    b.send(b"x")
+    assert s._ready_select(0.0006) == ([a.fileno()], [])
+    fd = a.fileno()
+    a.close()
+    s._ready_select(0.0)
+    assert fd not in s._readers and "dropping closed file descriptor" in caplog.text
+    b.close()

@@ -16,7 +16,7 @@ from prompt_toolkit.history import FileHistory, InMemoryHistory
 
 from ramp.mcp.messages import Request, Response
 from ramp.mcp.protocol import parse_response_line
-from ramp.shell import (
+from ramp.shell.cli import (
     Shell,
     UsageError,
     accepted_motion,
@@ -28,8 +28,8 @@ from ramp.shell import (
     stop_message,
     watchdog_timeout,
 )
-from ramp.shell_complete import complete, current_fragment, param_hint, split_command
-from ramp.shell_render import (
+from ramp.shell.complete import complete, current_fragment, param_hint, split_command
+from ramp.shell.render import (
     Catalog,
     build_catalog,
     error_text,

@@ -16,8 +16,9 @@ from firmware_like.marte import MarteWorld
 from ramp.autonomy.hal.lidar import Scan, ScanGeometry
 from ramp.autonomy.mcp_link import McpLink
 from ramp.autonomy.mount import Mount
+from ramp.autonomy.perception.cloud import plan_sweep
 from ramp.autonomy.perception.records import ScanRecord
-from ramp.autonomy.perception.sweep import DONE, TiltSweep
+from ramp.autonomy.perception.sweep import DONE, Sweep
 from ramp.simulation.backend import SimBackend
 from ramp.simulation.rig import Rig, load_autonomy_config, shift_window
 
@@ -92,27 +93,46 @@ def test_the_drivers_come_up_and_every_scan_record_lies_on_the_walls(rig: Rig) -
     assert float(np.median(np.abs(pts[on_wall, 2] - lidar_z))) < 0.03
 
 
-def test_a_tilt_sweep_puts_every_return_on_the_true_surface(rig: Rig) -> None:
+def test_a_stop_and_go_sweep_keeps_one_whole_scan_per_tilt_on_the_true_surface(
+        rig: Rig) -> None:
     assert rig.run_until(lambda: rig.perception.ready, 5.0)
-    sweep = TiltSweep(rig.leveller, rig.scans, rig.pan_tilt, start_deg=5.0, end_deg=30.0,
-                      speed_dps=10.0)
-    task = rig.scheduler.add_task("sweep", rig.scheduler.rate_hz, sweep.tick)
+    cfg = rig.config
+    plan = plan_sweep(cfg.lidar.mount, cfg.gimbal.pivot, near_m=1.0, far_m=2.5, spacing_m=0.1,
+                      tilt_max_deg=75.0)
+    sweep = Sweep(rig.leveller, rig.scans, rig.pan_tilt, plan, ahrs=rig.ahrs)
+    horn: list[tuple[float, float]] = []  # the servo's true tilt, every tick
+    tasks = [rig.scheduler.add_task("sweep", rig.scheduler.rate_hz, sweep.tick),
+             rig.scheduler.add_task("horn", rig.scheduler.rate_hz,
+                                    lambda now, dt: horn.append(
+                                        (now, rig.gimbal_emulator.angles()[1])))]
     sweep.start(rig.clock.now())
-    assert rig.run_until(lambda: sweep.finished, 10.0)
-    rig.scheduler.remove_task(task)
-    assert sweep.state == DONE and not sweep.saturated
-    tilts = [r.tilt_deg for r in sweep.records]
-    assert len(sweep.records) > 90 and tilts == sorted(tilts)  # 2.5 s at 40 scans/s
-    assert rig.pan_tilt.tilt.velocity_limit_dps == rig.config.gimbal.tilt.velocity_dps
+    assert rig.run_until(lambda: sweep.finished, plan.duration_s + 1.0)
+    for task in tasks:
+        rig.scheduler.remove_task(task)
+    assert sweep.state == DONE and not sweep.saturated and not sweep.attitude_changed
+    assert len(sweep.records) == plan.scans == 16
     world = rig.world
+    for record, tilt in zip(sweep.records, plan.tilts_deg, strict=True):
+        # the servo took the chassis' pitch out: the plan's tilts are below the horizon
+        assert record.tilt_deg + math.degrees(world.pitch) == pytest.approx(tilt, abs=0.3)
+        assert record.started is not None
+        end = record.started + 0.01875  # 1081 steps of 1440 at 25 ms a turn
+        before = max(t for t, _ in horn if t <= record.started)
+        after = min(t for t, _ in horn if t >= end)
+        during = [a for t, a in horn if before <= t <= after]
+        assert max(during) - min(during) < 0.01  # the gimbal stood still all through the scan
+    times = [r.t for r in sweep.records]
+    assert all(b - a >= 0.025 for a, b in zip(times, times[1:], strict=False))
     pts = arena_points(sweep.records, world)
     scanner = rig.true_lidar_pose().origin
     off_robot = np.hypot(pts[:, 0] - scanner[0], pts[:, 1] - scanner[1]) > 0.8  # frame posts
     inside = (wall_distance(pts) > 0.05) & off_robot
     ground = world.terrain.height(pts[inside, 0], pts[inside, 1])
     err = np.abs(pts[inside, 2] - ground)
-    assert inside.sum() > 30_000
+    assert inside.sum() > 5_000
     assert float(np.median(err)) < 0.01 and float(np.mean(err < 0.05)) > 0.98
+    assert rig.run_until(lambda: rig.leveller.settled, 3.0)  # level again afterwards
+    assert rig.leveller.wanted_tilt_deg == 0.0
 
 
 def test_the_same_seed_gives_the_same_run() -> None:

@@ -190,7 +190,7 @@ def test_install_into_a_root_is_idempotent_and_keeps_the_config(tmp_path: Path) 
     first = install("--root", str(tmp_path))
     assert first.returncode == 0, first.stderr
     app = tmp_path / "opt" / "ramp"
-    assert (app / "ramp" / "shell.py").is_file()
+    assert (app / "ramp" / "shell" / "cli.py").is_file()
     assert (app / "scripts" / "ramp.service").is_file()
     assert not (app / ".git").exists() and not (app / ".venv").exists()
     unit = tmp_path / "etc" / "systemd" / "system" / "ramp.service"

@@ -1,9 +1,9 @@
 """Scan for Obstacles and Detect Obstacles (thesis 5.3.4, figure 5.40).
 
 - **Scan for Obstacles**: the 3D scan from where Prepare for Scan left the robot (standing,
-  facing +x): `cloud.plan_sweep`'s tilts, which lay ground lines every `sweep_spacing_m` from
-  the obstacle region's near edge (or as near as the tilt servo's travel lets the LIDAR look)
-  to 0.3 m past its far edge, taken stop-and-go (`sensing.StopAndGoSweep`).
+  facing +x): `pipeline.plan_scan`'s tilts, which lay ground lines every `sweep_spacing_m`
+  from as near as the tilt servo's travel lets the LIDAR look to 0.3 m past the obstacle
+  region's far edge, taken stop-and-go (`sensing.StopAndGoSweep`).
 - **Detect Obstacles**: rocks and craters from the sweep at the pose it was taken from
   (`pipeline.detect_obstacles`), then the map the planner works on: every obstacle a disc
   grown by `obstacle_margin_m` (the detector's measured errors), more for one seen only in
@@ -16,8 +16,7 @@ from collections.abc import Sequence
 
 from ramp.autonomy.executive.sensing import DONE, FAILED, StopAndGoSweep
 from ramp.autonomy.executive.step import Step
-from ramp.autonomy.perception.cloud import region_distances, sweep_from_config
-from ramp.autonomy.perception.pipeline import Obstacle, PoseEstimate
+from ramp.autonomy.perception.pipeline import Obstacle, PoseEstimate, plan_scan
 from ramp.autonomy.planning import ArenaMap, DigSites, Disc, Planner
 from ramp.statemachine import MissionContext, Status
 
@@ -58,13 +57,12 @@ class ScanForObstacles(Step):
             if kit.perception.odometry.moving:
                 kit.robot.halt_base()
                 return Status.running()
-            try:
-                near, far = region_distances(pose[0])
-                plan = sweep_from_config(kit.config, near, far, kit.settings.sweep_spacing_m)
-            except ValueError as exc:
-                return Status.failed(f"no sweep from x {pose[0]:.2f}: {exc}")
-            self.ctx.notes[SWEEP_POSE_NOTE] = PoseEstimate(pose[0], pose[1], pose[2],
-                                                           tracker.confidence)
+            here = PoseEstimate(pose[0], pose[1], pose[2], tracker.confidence)
+            plan = plan_scan(kit.config, here)
+            if plan is None:
+                return Status.failed(f"no ground to scan from x {pose[0]:.2f} y "
+                                     f"{pose[1]:.2f}")
+            self.ctx.notes[SWEEP_POSE_NOTE] = here
             self.sweep = StopAndGoSweep(kit, plan)
             self.sweep.start(now)
         state = self.sweep.tick(now)

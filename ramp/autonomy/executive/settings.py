@@ -16,7 +16,6 @@ class ExecutiveSettings:
     # -- sensing ------------------------------------------------------------------------------
     localize_scans: int = 10  # level scans (25 ms each) for one localization
     still_s: float = 0.3  # after a stop, before scans count as taken standing still
-    sweep_spacing_m: float = 0.04  # 3D scan: ground lines this far apart (cloud.plan_sweep)
     vantage_x_m: float = 0.80  # 3D scan from here, facing +x: the front edge 0.1 m short of the
     #   obstacle region, as in the obstacle detector's accuracy runs (x = 0.8-0.9 m)
     # -- driving ------------------------------------------------------------------------------

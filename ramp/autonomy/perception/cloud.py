@@ -31,9 +31,10 @@ scans and 12.6 s; the moves dominate (small steps are acceleration-bound).
 
 **The tilt limit blinds the scanner close ahead**: level ground nearer than
 `ground_ahead(mount, pivot, tilt_max)` is never seen (`SweepPlan.blind_m`). With the
-simulator's scanner (0.40 m ahead, 0.70 m up) and autonomy.yaml's assumed 45 deg travel
-that is 1.10 m ahead of the footprint centre: from the start region (x <= 0.9 facing +x) the
-first 0.2 m of the obstacle region. 75 deg brings it down to 0.59 m, inside the start region.
+simulator's scanner (0.40 m ahead, 0.70 m up) a 45 deg travel would leave 1.10 m ahead of the
+footprint centre unseen: from the start region (x <= 0.9 facing +x) the first 0.2 m of the
+obstacle region. 75 deg brings it down to 0.59 m, inside the start region: autonomy.yaml's
+tilt servo reaches 80 deg and `pipeline.plan_scan` plans to 75 (5 deg kept for the pitch).
 
 `merge` puts every valid return in the arena frame (SPEC 6.1) with each record's own roll and
 pitch and remembers where each point came from (which scan, which beam, the scanner's

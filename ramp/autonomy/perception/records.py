@@ -39,6 +39,8 @@ class ScanRecord:
     yaw: float | None = None  # AHRS yaw at `t`, rad CCW from +x, when it has one
     pan_deg: float = 0.0  # gimbal angles as the servos reported them (for plots and logs)
     tilt_deg: float = 0.0
+    started: float | None = None  # host clock when its first beam was measured, s (a
+    # stop-and-go sweep keeps only scans begun after the gimbal arrived)
 
     @property
     def valid(self) -> npt.NDArray[np.bool_]:

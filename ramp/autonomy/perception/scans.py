@@ -121,6 +121,12 @@ class ScanCollector:
         front = g.afrt / g.ares * g.scan_period_s
         return scan.sensor_time + self._offset - ready + front
 
+    @staticmethod
+    def lead_s(scan: Scan) -> float:
+        """How long before its beam ahead a scan's first beam was measured, s."""
+        g = scan.geometry
+        return (g.afrt - scan.first_step) / g.ares * g.scan_period_s
+
     def _on_scan(self, scan: Scan) -> None:
         t = self.scan_time(scan)
         angles = self.angles_at(t)
@@ -135,7 +141,7 @@ class ScanCollector:
         record = ScanRecord(t=t, ranges=scan.ranges, angles=scan.angles,
                             lidar_position=position, lidar_rotation=rotation, roll=roll,
                             pitch=pitch, yaw=yaw if self.ahrs.yaw_known else None,
-                            pan_deg=pan, tilt_deg=tilt)
+                            pan_deg=pan, tilt_deg=tilt, started=t - self.lead_s(scan))
         self.records.append(record)
         self.latest = record
         for fn in list(self._listeners):

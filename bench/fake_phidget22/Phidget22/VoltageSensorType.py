@@ -1,0 +1,5 @@
+"""`Phidget22.VoltageSensorType` stand-in."""
+
+
+class VoltageSensorType:
+    SENSOR_TYPE_VOLTAGE = 0

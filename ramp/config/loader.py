@@ -1,0 +1,545 @@
+"""`ramp.yaml` -> validated, frozen configuration.
+
+Every error names the file, the line, the key path and what was expected, and all of them
+are collected in one pass so `ramp check` can show a team everything to fix at once.
+Drivers and modules declare their own keys and the rules spanning them (`Bus.fields`,
+`Bus.channel_fields`, `Module.devices`, `Module.settings`); this loader only walks the tree
+and runs the one block check (`ramp.schema.validate`) on each. It produces data and builds
+nothing: drivers and modules are built from that data by `ramp.runtime.build`, so `ramp
+check` touches no hardware and runs no module code.
+
+Hostile or broken files end in such an error too, never in a traceback or a hang: the file
+is at most `MAX_FILE_BYTES` of UTF-8, nesting is capped at `MAX_DEPTH` and alias expansion
+at `MAX_NODES` values (a kilobyte "billion laughs" once took 14 s and 800 MB), keys must be
+names (a list or mapping as a key is reported where it is), values are cut short in messages,
+and YAML merge keys (`<<: *defaults`) work as YAML says: explicit keys override merged ones.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import yaml
+
+from ramp.errors import ConfigError, ConfigErrors
+from ramp.hal import driver_class
+from ramp.hal.interfaces import Bus
+from ramp.layers.module_distribution import Module
+from ramp.layers.robot_distribution.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S
+from ramp.modules import module_class
+from ramp.schema import Block, Field, shorten, validate
+
+#: A config file is a few kB; anything past this is refused before parsing.
+MAX_FILE_BYTES = 1 << 20
+#: Deepest nesting of mappings and lists (a real config needs 4 or 5).
+MAX_DEPTH = 32
+#: Most values the document may expand to once aliases are counted at every use.
+MAX_NODES = 50_000
+#: A module's name is an MCP name (`base:base.get=()`), and `robot` is taken.
+MODULE_NAME = re.compile(r"[A-Za-z0-9_]{1,32}")
+_HOST_LABEL = re.compile(r"[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?")
+
+
+class MarkedMap(dict[Any, Any]):
+    """A YAML mapping that remembers the line of itself and of each key."""
+
+    line: int = 0
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.lines: dict[Any, int] = {}
+        self.duplicates: list[tuple[Any, int]] = []
+
+
+class BadKey:
+    """Stands in for a key YAML allows and a config cannot use (a list or a mapping)."""
+
+    def __init__(self, kind: str, line: int) -> None:
+        self.kind = kind
+        self.line = line
+
+    def __str__(self) -> str:
+        return f"<{self.kind}>"
+
+
+class _Loader(yaml.SafeLoader):
+    """SafeLoader with limits on nesting and on alias expansion."""
+
+    def __init__(self, stream: str) -> None:
+        super().__init__(stream)
+        self._depth = 0
+        self._sizes: dict[int, int] = {}  # id(node) -> values it expands to, aliases included
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        if self.check_event(yaml.AliasEvent):
+            return super().compose_node(parent, index)  # counted where it is used
+        self._depth += 1
+        try:
+            if self._depth > MAX_DEPTH:
+                raise yaml.composer.ComposerError(
+                    None, None, f"nested deeper than {MAX_DEPTH} levels",
+                    self.peek_event().start_mark)
+            node = super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+        if node is None:  # pragma: no cover - only at the end of a stream
+            return node
+        size = 1
+        if isinstance(node, yaml.SequenceNode):
+            size += sum(self._sizes.get(id(n), 1) for n in node.value)
+        elif isinstance(node, yaml.MappingNode):
+            size += sum(self._sizes.get(id(k), 1) + self._sizes.get(id(v), 1)
+                        for k, v in node.value)
+        if size > MAX_NODES:
+            raise yaml.composer.ComposerError(
+                None, None, f"expands to more than {MAX_NODES} values once its aliases are "
+                "counted (an alias bomb?)", node.start_mark)
+        self._sizes[id(node)] = size
+        return node
+
+    def construct_object(self, node: Any, deep: bool = False) -> Any:
+        """A scalar Python cannot build (an integer of 100,000 digits, the 13th month of a
+        timestamp) is a YAML error at its line, not a ValueError from deep inside PyYAML."""
+        try:
+            return super().construct_object(node, deep)
+        except (ValueError, OverflowError) as exc:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"cannot read this value: {shorten(str(exc), 120)}",
+                node.start_mark) from None
+
+
+def _construct_mapping(loader: _Loader, node: yaml.MappingNode) -> MarkedMap:
+    merge_tag = "tag:yaml.org,2002:merge"
+    explicit = sum(1 for k, _ in node.value if k.tag != merge_tag)
+    loader.flatten_mapping(node)
+    merged = len(node.value) - explicit  # flatten_mapping puts merged pairs first
+    out = MarkedMap()
+    out.line = node.start_mark.line + 1
+    explicit_keys: set[Any] = set()
+    for i, (key_node, value_node) in enumerate(node.value):
+        key = loader.construct_object(key_node, deep=True)
+        value = loader.construct_object(value_node, deep=True)
+        line = key_node.start_mark.line + 1
+        try:
+            hash(key)
+        except TypeError:
+            key = BadKey(_kind(key), line)
+        if i >= merged:  # a merged key is overridden by an explicit one, as YAML says
+            if key in explicit_keys:
+                out.duplicates.append((key, line))
+            explicit_keys.add(key)
+        out[key] = value
+        out.lines[key] = line
+    return out
+
+
+_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+
+
+SERVER_FIELDS = {
+    "host": Field(str, "0.0.0.0", what="a host name or address"),
+    "port": Field(int, 5577, lo=0, hi=65535, what="a TCP port"),
+    "max_clients": Field(int, 8, lo=1, hi=4096, what="a number of clients"),
+    "max_line": Field(int, 4096, lo=64, hi=1 << 20, what="a message length in bytes"),
+    "max_output": Field(int, 1 << 20, lo=4096, hi=1 << 28,
+                        what="bytes of unsent responses before a client is cut off"),
+}
+WATCHDOG_FIELDS = {
+    "timeout": Field(float, 1.0, lo=MIN_TIMEOUT_S, hi=MAX_TIMEOUT_S, what="a timeout in seconds"),
+}
+SCHEDULER_FIELDS = {
+    "rate_hz": Field(float, 100.0, lo=1.0, hi=1000.0, what="a tick rate in Hz"),
+    "stall_limit": Field(float, 0.25, lo=0.02, hi=10.0,
+                         what="seconds a tick may stall before motors are stopped"),
+}
+BUS_COMMON = {"driver", "sim"}
+
+
+@dataclass(frozen=True)
+class ServerConfig:
+    host: str = "0.0.0.0"
+    port: int = 5577
+    max_clients: int = 8
+    max_line: int = 4096
+    max_output: int = 1 << 20
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    name: str
+    driver: str
+    params: Mapping[str, Any]
+    sim: bool = True  # replaced by its emulator under --sim
+    line: int = 0
+
+
+@dataclass(frozen=True)
+class DeviceConfig:
+    name: str
+    bus: str
+    kind: str
+    channel: Mapping[str, Any]
+    params: Mapping[str, Any]
+    line: int = 0
+
+
+@dataclass(frozen=True)
+class ModuleConfig:
+    name: str
+    type: str
+    devices: Mapping[str, DeviceConfig]
+    settings: Mapping[str, Mapping[str, Any]]
+    line: int = 0
+
+
+@dataclass(frozen=True)
+class Config:
+    file: str
+    server: ServerConfig = ServerConfig()
+    watchdog_timeout: float = 1.0
+    rate_hz: float = 100.0
+    stall_limit: float = 0.25
+    buses: Mapping[str, BusConfig] = field(default_factory=dict)
+    modules: Mapping[str, ModuleConfig] = field(default_factory=dict)
+    #: Line of some keys (`server.max_clients`), for checks made at run time.
+    lines: Mapping[str, int] = field(default_factory=dict)
+
+
+class _Checker:
+    """Walks the YAML tree collecting errors instead of stopping at the first."""
+
+    def __init__(self, file: str) -> None:
+        self.file = file
+        self.errors: list[ConfigError] = []
+
+    def err(self, key: str, line: int, message: str) -> None:
+        self.errors.append(ConfigError(shorten(message, 300), file=self.file, line=line,
+                                       key=shorten(key, 120)))
+
+    def block(self, parent: MarkedMap, key: str, path: str, fields: Mapping[str, Field],
+              skip: set[str] | frozenset[str] = frozenset()) -> dict[str, Any]:
+        """Check the mapping `parent[key]` against `fields`; returns values (defaults on error)."""
+        raw = parent.get(key)
+        line = parent.lines.get(key, parent.line)
+        if raw is None:
+            raw = MarkedMap()
+            raw.line = line
+        if not isinstance(raw, dict):
+            self.err(path, line, f"expected a mapping, got {_kind(raw)}")
+            return {k: f.default for k, f in fields.items() if not f.required}
+        return self.values(raw, path, fields, skip)
+
+    def values(self, raw: dict[Any, Any], path: str, fields: Mapping[str, Field],
+               skip: set[str] | frozenset[str] = frozenset()) -> dict[str, Any]:
+        """`ramp.schema.validate` on one block, each problem at its key's line (a rule
+        spanning the block at the block's own line)."""
+        here = getattr(raw, "line", 0)
+        lines = {str(k): v for k, v in getattr(raw, "lines", {}).items()}
+        for dup, dline in getattr(raw, "duplicates", []):
+            self.err(f"{path}.{dup}", dline, "key given twice")
+        out, problems = validate(fields, raw, skip)
+        for key, message in problems:
+            self.err(f"{path}.{key}" if key else path, lines.get(key, here), message)
+        return out
+
+
+def _kind(v: Any) -> str:
+    if v is None:
+        return "nothing"
+    for t, words in ((bool, "true/false"), (dict, "a mapping"), (list, "a list"),
+                     (str, "a string"), (int, "an integer"), (float, "a number")):
+        if isinstance(v, t):
+            return words
+    return type(v).__name__
+
+
+def load_config(path: str | Path) -> Config:
+    """Load and check a config file; raises ConfigErrors listing every problem."""
+    config, errors = check_config(path)
+    if errors or config is None:
+        raise ConfigErrors(errors)
+    return config
+
+
+def check_config(path: str | Path) -> tuple[Config | None, list[ConfigError]]:
+    """(config or None, every error found) without touching any hardware.
+
+    A robot's file must exist, be UTF-8, hold at most MAX_FILE_BYTES and name at least one
+    module; `parse_config` (text, used by tests and tools) does not insist on modules."""
+    name = str(path)
+    try:
+        with Path(path).open("rb") as f:
+            data = f.read(MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        return None, [ConfigError(f"cannot read: {exc.strerror or exc}", file=name)]
+    if len(data) > MAX_FILE_BYTES:
+        return None, [ConfigError(f"larger than {MAX_FILE_BYTES // 1024} KiB; a config file "
+                                  "is a few kB", file=name)]
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        return None, [ConfigError(f"not UTF-8: byte 0x{data[exc.start]:02x} at column {column} "
+                                  "(save the file as UTF-8)", file=name, line=line)]
+    config, errors = parse_config(text, name)
+    if errors or config is None:
+        return config, errors
+    if not config.modules:
+        what = "the file is empty" if not text.strip(" \t\r\n#") or not _has_content(text) \
+            else "no modules"
+        return None, [ConfigError(f"{what}; expected a modules section naming at least one "
+                                  "module (see ramp.yaml)", file=name, line=1, key="modules")]
+    return config, errors
+
+
+def _has_content(text: str) -> bool:
+    return any(line.strip() and not line.lstrip().startswith("#") for line in text.splitlines())
+
+
+def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, list[ConfigError]]:
+    try:
+        root = yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as exc:
+        return None, [_yaml_error(exc, text, name)]
+    except RecursionError:  # pragma: no cover - MAX_DEPTH keeps the composer far from it
+        return None, [ConfigError("not valid YAML: nested too deeply", file=name)]
+    c = _Checker(name)
+    if root is None:
+        root = MarkedMap()
+        root.line = 1
+    if not isinstance(root, MarkedMap):
+        c.err("", 1, f"expected a mapping of sections at the top, got {_kind(root)}")
+        return None, c.errors
+    _report_bad_keys(c, root)
+    top = {"server", "watchdog", "scheduler", "buses", "modules"}
+    for k in root:
+        if k not in top:
+            c.err(str(k), root.lines.get(k, 1),
+                  f"unknown section (expected one of: {', '.join(sorted(top))})")
+    for dup, dline in root.duplicates:
+        c.err(str(dup), dline, "section given twice")
+    server = c.block(root, "server", "server", SERVER_FIELDS)
+    _check_host(c, root, server)
+    wd = c.block(root, "watchdog", "watchdog", WATCHDOG_FIELDS)
+    sched = c.block(root, "scheduler", "scheduler", SCHEDULER_FIELDS)
+    buses, bus_classes = _buses(c, root)
+    modules = _modules(c, root, buses, bus_classes)
+    if c.errors:
+        return None, c.errors
+    cfg = Config(
+        file=name,
+        server=ServerConfig(**server),
+        watchdog_timeout=wd["timeout"],
+        rate_hz=sched["rate_hz"],
+        stall_limit=sched["stall_limit"],
+        buses=MappingProxyType(buses),
+        modules=MappingProxyType(modules),
+        lines=MappingProxyType(_server_lines(root)),
+    )
+    return cfg, []
+
+
+def _yaml_error(exc: yaml.YAMLError, text: str, name: str) -> ConfigError:
+    """`file:line: not valid YAML: problem`, for the parser's errors and the reader's (a NUL
+    byte or another character YAML refuses, which carry a position instead of a mark)."""
+    mark = getattr(exc, "problem_mark", None)
+    line = mark.line + 1 if mark is not None else 0
+    problem = getattr(exc, "problem", None)
+    position = getattr(exc, "position", None)
+    if isinstance(exc, yaml.reader.ReaderError) and isinstance(position, int):
+        line = text.count("\n", 0, position) + 1
+        problem = f"character #x{exc.character:04x} is not allowed in YAML" \
+            if isinstance(exc.character, int) else exc.reason
+    return ConfigError(f"not valid YAML: {shorten(str(problem or exc), 200)}", file=name,
+                       line=line)
+
+
+def _report_bad_keys(c: _Checker, root: MarkedMap) -> None:
+    """A list or a mapping used as a key: reported where it is, then left out."""
+    stack: list[tuple[Any, str]] = [(root, "")]
+    while stack:
+        node, path = stack.pop()
+        if isinstance(node, MarkedMap):
+            for key in list(node):
+                where = f"{path}.{key}" if path else str(key)
+                if isinstance(key, BadKey):
+                    c.err(path or "(top)", key.line,
+                          f"a key must be a name, not {key.kind}")
+                    del node[key]
+                    continue
+                stack.append((node[key], where))
+        elif isinstance(node, list):
+            stack.extend((v, f"{path}[{i}]") for i, v in enumerate(node))
+
+
+def _check_host(c: _Checker, root: MarkedMap, server: dict[str, Any]) -> None:
+    host = server.get("host")
+    raw = root.get("server")
+    line = raw.lines.get("host", raw.line) if isinstance(raw, MarkedMap) else 0
+    if isinstance(host, str) and not valid_host(host):
+        c.err("server.host", line, f"{shorten(repr(host), 60)} is not an IP address or host "
+                                   "name (0.0.0.0 serves on every interface)")
+        server["host"] = SERVER_FIELDS["host"].default
+
+
+def valid_host(host: str) -> bool:
+    """An IPv4 or IPv6 address, or a host name (letters, digits, `-`, dots between labels).
+    Four numbers that are not an IPv4 address (999.1.1.1) are neither."""
+    try:
+        ipaddress.ip_address(host)
+        return True
+    except ValueError:
+        pass
+    name = host[:-1] if host.endswith(".") else host
+    labels = name.split(".")
+    if not name or len(name) > 253 or all(label.isdigit() for label in labels):
+        return False
+    return all(_HOST_LABEL.fullmatch(label) for label in labels)
+
+
+def _server_lines(root: MarkedMap) -> dict[str, int]:
+    """Lines of the server keys, for errors found at run time (`server.max_clients`)."""
+    raw = root.get("server")
+    if not isinstance(raw, MarkedMap):
+        return {}
+    return {f"server.{k}": line for k, line in raw.lines.items() if isinstance(k, str)}
+
+
+def _buses(c: _Checker, root: MarkedMap) -> tuple[dict[str, BusConfig], dict[str, type[Bus]]]:
+    out: dict[str, BusConfig] = {}
+    classes: dict[str, type[Bus]] = {}
+    raw = root.get("buses")
+    if raw is None:
+        return out, classes
+    if not isinstance(raw, MarkedMap):
+        c.err("buses", root.lines.get("buses", 0), f"expected a mapping, got {_kind(raw)}")
+        return out, classes
+    for dup, dline in raw.duplicates:
+        c.err(f"buses.{dup}", dline, "bus given twice")
+    for name, entry in raw.items():
+        path = f"buses.{name}"
+        line = raw.lines.get(name, raw.line)
+        if not isinstance(entry, MarkedMap):
+            c.err(path, line, f"expected a mapping with a driver, got {_kind(entry)}")
+            continue
+        driver = entry.get("driver")
+        if not isinstance(driver, str) or len(driver) > 64:
+            c.err(f"{path}.driver", entry.lines.get("driver", entry.line),
+                  "missing; expected a driver name (sabertooth, phidget, can, sim)")
+            continue
+        try:
+            cls = driver_class(driver)
+        except ValueError as exc:
+            c.err(f"{path}.driver", entry.lines.get("driver", entry.line), str(exc))
+            continue
+        except ImportError as exc:
+            c.err(f"{path}.driver", entry.lines.get("driver", entry.line),
+                  f"driver {driver} cannot be loaded: {exc}")
+            continue
+        sim = entry.get("sim", True)
+        if not isinstance(sim, bool):
+            c.err(f"{path}.sim", entry.lines.get("sim", entry.line),
+                  f"{shorten(repr(sim))} is not true or false")
+            sim = True
+        params = c.values(entry, path, dict(cls.fields), skip=BUS_COMMON)
+        out[str(name)] = BusConfig(str(name), driver, MappingProxyType(params), sim, line)
+        classes[str(name)] = cls
+    return out, classes
+
+
+def _modules(c: _Checker, root: MarkedMap, buses: dict[str, BusConfig],
+             bus_classes: dict[str, type[Bus]]) -> dict[str, ModuleConfig]:
+    out: dict[str, ModuleConfig] = {}
+    raw = root.get("modules")
+    if raw is None:
+        return out
+    if not isinstance(raw, MarkedMap):
+        c.err("modules", root.lines.get("modules", 0), f"expected a mapping, got {_kind(raw)}")
+        return out
+    used: dict[tuple[str, str, tuple[Any, ...]], str] = {}
+    for name, entry in raw.items():
+        path = f"modules.{name}"
+        line = raw.lines.get(name, raw.line)
+        if name == "robot":
+            c.err(path, line, "`robot` is reserved for robot-level requests")
+            continue
+        if not isinstance(name, str) or not MODULE_NAME.fullmatch(name):
+            c.err(path, line, "a module name is 1-32 letters (A-Z, a-z), digits or _, since "
+                              "clients address it over MCP (base:base.get=())")
+            continue
+        if not isinstance(entry, MarkedMap):
+            c.err(path, line, f"expected a mapping of devices, got {_kind(entry)}")
+            continue
+        type_name = entry.get("type", name)
+        try:
+            cls = module_class(str(type_name))
+        except ValueError as exc:
+            c.err(f"{path}.type", entry.lines.get("type", line), str(exc))
+            continue
+        mod = _module(c, path, str(name), str(type_name), cls, entry, buses, bus_classes, used)
+        if mod is not None:
+            out[str(name)] = mod
+    return out
+
+
+def _module(c: _Checker, path: str, name: str, type_name: str, cls: type[Module],
+            entry: MarkedMap, buses: dict[str, BusConfig], bus_classes: dict[str, type[Bus]],
+            used: dict[tuple[str, str, tuple[Any, ...]], str]) -> ModuleConfig | None:
+    devices: dict[str, DeviceConfig] = {}
+    settings: dict[str, Mapping[str, Any]] = {}
+    for dup, dline in entry.duplicates:
+        c.err(f"{path}.{dup}", dline, "key given twice")
+    for key in entry:
+        if key != "type" and key not in cls.devices and key not in cls.settings:
+            expected = sorted([*cls.devices, *cls.settings, "type"])
+            c.err(f"{path}.{key}", entry.lines.get(key, entry.line),
+                  f"unknown device or setting for a {type_name} module (expected one of: "
+                  f"{', '.join(expected)})")
+    for block, fields in cls.settings.items():
+        settings[block] = MappingProxyType(c.block(entry, block, f"{path}.{block}", fields))
+    for dev, spec in cls.devices.items():
+        dpath = f"{path}.{dev}"
+        raw = entry.get(dev)
+        dline = entry.lines.get(dev, entry.line)
+        if raw is None:
+            c.err(dpath, dline, f"missing; a {type_name} module needs a {spec.kind} device "
+                                f"`{dev}` ({spec.help or 'see the README'})")
+            continue
+        if not isinstance(raw, MarkedMap):
+            c.err(dpath, dline, f"expected a mapping with a bus, got {_kind(raw)}")
+            continue
+        bus = raw.get("bus")
+        if not isinstance(bus, str) or bus not in buses:
+            known = ", ".join(sorted(buses)) or "none defined"
+            c.err(f"{dpath}.bus", raw.lines.get("bus", raw.line),
+                  f"{shorten(repr(bus))} is not a bus (known: {known})" if bus is not None
+                  else f"missing; expected a bus name (known: {known})")
+            continue
+        bcls = bus_classes[bus]
+        if spec.kind not in bcls.channel_fields:
+            c.err(f"{dpath}.bus", raw.lines.get("bus", raw.line),
+                  f"bus {bus} (driver {bcls.driver_name}) has no {spec.kind} channels, which "
+                  f"{dev} needs")
+            continue
+        ch_fields = bcls.channel_fields[spec.kind]
+        # The driver's channel keys and the device's own, with the device's rules.
+        all_fields = Block({**ch_fields, **spec.fields}, getattr(spec.fields, "rules", ()))
+        values = c.values(raw, dpath, all_fields, skip={"bus"})
+        channel = {k: values[k] for k in ch_fields if k in values}
+        params = {k: values[k] for k in spec.fields if k in values}
+        ident = (bus, spec.kind, tuple(sorted(channel.items())))
+        if ch_fields and ident in used:
+            c.err(dpath, dline, f"uses the same {spec.kind} channel of bus {bus} as "
+                                f"{used[ident]}")
+        used[ident] = f"{name}.{dev}"
+        devices[dev] = DeviceConfig(dev, bus, spec.kind, MappingProxyType(channel),
+                                    MappingProxyType(params), dline)
+    return ModuleConfig(name, type_name, MappingProxyType(devices), MappingProxyType(settings),
+                        entry.line)

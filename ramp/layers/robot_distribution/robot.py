@@ -1,0 +1,306 @@
+"""Robot Distribution layer: routes requests to modules and owns the robot-wide rules.
+
+Module state, control ownership and the watchdog live here because they concern the whole
+robot; each module's own table (the module distribution layer) does the device, function and
+parameter checks. Checks run in the SPEC's order: module known, module state, device and
+function, parameters, ownership.
+
+The server hands each message down as a `RequestContext` (client, time): `message(ctx)` once
+(it feeds the watchdog), then `request(ctx, req)` for each of its requests, which returns the
+request's answer as it goes on the wire.
+
+**The state's version.** Anything a `get` reports changes only inside a tick (readings,
+controllers, LED phases) or through this layer (a request that is not a read, a lost client,
+a stall, a robot-wide stop). `changes` counts the second kind; with the scheduler's tick
+count it makes the version a module's cached get answer is checked against
+(`ramp.layers.module_distribution`), so a cache can never serve a stale answer.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from ramp.errors import RequestError
+from ramp.layers.module_distribution import Function, Module
+from ramp.layers.module_distribution.router import Version, answer
+from ramp.layers.robot_distribution.context import Client, RequestContext
+from ramp.layers.robot_distribution.control import Control
+from ramp.layers.robot_distribution.registry import ModuleRegistry, ModuleSlot
+from ramp.layers.robot_distribution.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S, Watchdog
+from ramp.mcp.messages import Request, Response, Value, error_response
+from ramp.mcp.params import FloatParam, NameParam
+from ramp.mcp.protocol import format_response
+
+log = logging.getLogger("ramp.robot")
+
+#: Observer hook: (owner name or "none", the client's peer, clock time) when control changes.
+ControlHook = Callable[[str, str, float], None]
+
+
+@dataclass(frozen=True)
+class Health:
+    """Supervisor figures the robot layer reports but does not own."""
+
+    uptime: float
+    rate_hz: float
+    late_us: tuple[float, float, float]
+    overruns: int
+    clients: int
+
+
+class TickCount(Protocol):
+    """Whatever counts the scheduler's ticks (its `TickStats`)."""
+
+    ticks: int
+
+
+class _NoTicks:
+    ticks = 0
+
+
+def _error(req: Request, code: str, detail: str) -> bytes:
+    return format_response(error_response(req.module, req.device, code, detail)).encode("ascii")
+
+
+class RobotRequests(Module):
+    """The `robot` module's table: robot-level requests of SPEC 2.1 and 2.2."""
+
+    def __init__(self, layer: RobotDistribution) -> None:
+        super().__init__("robot")
+        self.layer = layer
+        self.add(Function("robot", "modules", (), layer.list_modules, "read",
+                          "list attached modules"))
+        self.add(Function("watchdog", "timeout", (FloatParam(MIN_TIMEOUT_S, MAX_TIMEOUT_S),),
+                          layer.set_timeout, "state", "watchdog timeout in s",
+                          takes_context=True))
+        self.add(Function("control", "acquire", (NameParam(reserved=("none",)),),
+                          layer.acquire, "control", "become the owner (stops motion first)",
+                          takes_context=True))
+        self.add(Function("control", "release", (), layer.release, "state",
+                          "give control up", takes_context=True))
+
+    def _get(self) -> list[Response]:
+        return self.layer.health_rows()
+
+    def get_line(self, version: Version) -> bytes:
+        return answer(self.layer.health_rows())  # uptime moves: never cached
+
+    #: The rows of `robot.get`: (device, property, type, unit).
+    HEALTH_ROWS = (("robot", "uptime", "float", "s"), ("tick", "rate", "float", "Hz"),
+                   ("tick", "late", "int", "us"), ("tick", "overruns", "int", ""),
+                   ("watchdog", "timeout", "float", "s"), ("watchdog", "state", "name", ""),
+                   ("control", "owner", "name", ""), ("clients", "count", "int", ""))
+
+    def describe(self) -> list[Response]:
+        out = [Response("robot", "robot", "module", (name,)) for name in self.layer.slots]
+        for fn in self.functions.values():
+            out.append(Response("robot", fn.device, "function",
+                                (fn.name, *(p.describe() for p in fn.params))))
+        for device, prop, kind, unit in self.HEALTH_ROWS:
+            out.append(Response("robot", device, "property",
+                                (prop, kind, unit) if unit else (prop, kind)))
+        out.extend(Response("robot", name, "property", ("state", "name"))
+                   for name in self.layer.slots)
+        out.extend(Response("robot", fn.device, "kind", (fn.name, fn.kind))
+                   for fn in self.functions.values())
+        return out
+
+    def stop(self) -> None:
+        self.layer.stop_all("robot.stop")
+
+    def is_moving(self) -> bool:
+        return False
+
+
+class RobotDistribution:
+    """Routes each request of a message and applies watchdog and arbitration rules."""
+
+    def __init__(self, registry: ModuleRegistry, watchdog: Watchdog,
+                 health: Callable[[], Health], ticks: TickCount | None = None) -> None:
+        self.registry = registry
+        self.slots: dict[str, ModuleSlot] = registry.slots
+        self.watchdog = watchdog
+        self.control = Control()
+        self._health = health
+        #: The scheduler's tick count (the runtime passes its TickStats): half of the version.
+        self._ticks = ticks if ticks is not None else _NoTicks()
+        #: State changes made outside a tick (see the module docstring).
+        self.changes = 0
+        self.robot = RobotRequests(self)
+        #: Observer hook (the flight recorder): None costs nothing.
+        self.on_control: ControlHook | None = None
+
+    @property
+    def version(self) -> Version:
+        return (self._ticks.ticks, self.changes)
+
+    # -- messages -----------------------------------------------------------------------------
+    def message(self, ctx: RequestContext) -> None:
+        """A complete message arrived (any message: heartbeat, erroneous or too long): it
+        feeds the watchdog if its sender is the feeder, before its requests are handled."""
+        watchdog = self.watchdog
+        if watchdog.state == "armed":
+            watchdog.feed(ctx.client, ctx.now)
+
+    def request(self, ctx: RequestContext, req: Request) -> bytes:
+        """One request: its answer as it goes on the wire (b"" for an accepted action)."""
+        module = req.module
+        if module == "robot":
+            target: Module = self.robot
+        else:
+            slot = self.slots.get(module)
+            if slot is None or slot.state != "ok":
+                return self._unusable(req, slot)
+            target = slot.module
+        fn = target.functions.get((req.device, req.function))
+        if fn is not None and not fn.params and not req.params:
+            values: list[Any] = []  # the common case: nothing to convert
+        else:
+            try:
+                fn, values = target.lookup(req)
+            except RequestError as exc:
+                return _error(req, exc.code, exc.detail)
+        kind = fn.kind
+        if kind == "read":
+            line = fn.line
+            if line is not None:
+                return line((self._ticks.ticks, self.changes))
+            return answer(fn.run(*values))
+        if (kind == "motion" or kind == "state") and not self.control.may_command(ctx.client):
+            return _error(req, "not_owner", f"control is held by {self.control.owner_name}")
+        self.changes += 1
+        try:
+            result = fn.run(ctx, *values) if fn.takes_context else fn.run(*values)
+        except RequestError as exc:
+            return _error(req, exc.code, exc.detail)
+        except Exception as exc:
+            log.exception("request %s:%s.%s failed", req.module, req.device, req.function)
+            if kind == "motion":  # it may have started some motors with the watchdog idle
+                self._stop(target, "a failed motion request")
+            return _error(req, "fault", f"internal error {type(exc).__name__}")
+        if kind == "motion":
+            if self.any_moving():
+                self.watchdog.arm(ctx.client, ctx.now)
+            else:
+                self.watchdog.reset(ctx.now)
+        elif kind == "stop" and not self.any_moving():
+            self.watchdog.disarm(ctx.now)
+        return answer(result) if result else b""
+
+    def _unusable(self, req: Request, slot: ModuleSlot | None) -> bytes:
+        """A request to a module that is unknown, or not attached (SPEC 2's order)."""
+        if slot is None:
+            known = " ".join(["robot", *self.slots])
+            return _error(req, "unknown_module", f"no module {req.module}; known: {known}")
+        if req.device == req.module and req.function == "stop" and not req.params:
+            return b""  # its motion is already stopped
+        code = "not_attached" if slot.state == "detached" else "fault"
+        return _error(req, code, f"module {slot.name} is {slot.state}: {slot.reason}")
+
+    # -- robot-level functions ----------------------------------------------------------------
+    def list_modules(self) -> list[Response]:
+        names: tuple[Value, ...] = tuple(self.registry.attached())
+        return [Response("robot", "robot", "modules", names)]
+
+    def set_timeout(self, ctx: RequestContext, seconds: float) -> None:
+        self.watchdog.timeout = seconds
+        log.info("watchdog timeout set to %.3f s by %s", seconds, ctx.client.peer)
+
+    def acquire(self, ctx: RequestContext, name: str) -> None:
+        client = ctx.client
+        previous = self.control.owner_name
+        if self.control.acquire(client, name):
+            self.stop_all(f"control acquired by {name}", ctx.now)
+            if previous != "none":
+                log.warning("control taken over: %s -> %s (%s); motion stopped",
+                            previous, name, client.peer)
+            else:
+                log.info("control acquired by %s (%s)", name, client.peer)
+        self._control_changed(client, ctx.now)
+
+    def release(self, ctx: RequestContext) -> None:
+        client = ctx.client
+        if self.control.owner is client:
+            log.info("control released by %s (%s)", self.control.owner_name, client.peer)
+            self.control.release(client)
+            self._control_changed(client, ctx.now)
+
+    def _control_changed(self, client: Client, now: float) -> None:
+        if self.on_control is not None:
+            self.on_control(self.control.owner_name, client.peer, now)
+
+    # -- robot-wide safety --------------------------------------------------------------------
+    def any_moving(self) -> bool:
+        return any(s.state == "ok" and s.module.is_moving() for s in self.slots.values())
+
+    def stop_all(self, reason: str, now: float = 0.0) -> None:
+        """Every attached module stops all motion; nothing is left for the watchdog."""
+        self._stop_keep_trip(reason)
+        self.watchdog.disarm(now)
+
+    def tick(self, now: float, dt: float) -> None:
+        """Scheduler task: the watchdog timer."""
+        if self.watchdog.expired(now):
+            peer = getattr(self.watchdog.feeder, "peer", "?")
+            log.warning("watchdog expired: %s silent for %.2f s; stopping every module",
+                        peer, now - self.watchdog.last_feed)
+            self._stop_keep_trip("watchdog expired")
+
+    def stalled(self, reason: str, now: float = 0.0) -> None:
+        """The loop lost time (SPEC 2.2, stalls and freezes): every attached module stops and
+        the watchdog reads `tripped` until the next accepted motion request."""
+        self._stop_keep_trip(reason)
+        self.watchdog.trip(reason, now)
+
+    def protects(self, client: Client) -> bool:
+        """The owner, and the feeder of an armed watchdog, keep their connection when the
+        server must make room for a newcomer."""
+        return self.control.owner is client or (
+            self.watchdog.state == "armed" and self.watchdog.feeder is client)
+
+    def client_lost(self, client: Client, now: float = 0.0) -> None:
+        self.changes += 1
+        if self.control.owner is client:
+            log.info("control released: owner %s (%s) disconnected",
+                     self.control.owner_name, client.peer)
+            self.control.release(client)
+            self._control_changed(client, now)
+        if self.watchdog.client_lost(client, now):
+            log.warning("watchdog tripped: commanding client %s disconnected; stopping every"
+                        " module", client.peer)
+            self._stop_keep_trip("commanding client lost")
+
+    def _stop_keep_trip(self, reason: str) -> None:
+        """Every attached module stops; the watchdog state is left to the caller."""
+        self.changes += 1
+        for slot in self.slots.values():
+            if slot.state == "ok":
+                self._stop(slot.module, reason)
+
+    @staticmethod
+    def _stop(module: Module, reason: str) -> None:
+        try:
+            module.stop()
+        except Exception:
+            log.exception("module %s failed to stop (%s)", module.name, reason)
+
+    # -- health -------------------------------------------------------------------------------
+    def health_rows(self) -> list[Response]:
+        h = self._health()
+        p50, p99, mx = h.late_us
+        rows = [
+            Response("robot", "robot", "uptime", (round(h.uptime, 3),)),
+            Response("robot", "tick", "rate", (h.rate_hz,)),
+            Response("robot", "tick", "late", (int(p50), int(p99), int(mx))),
+            Response("robot", "tick", "overruns", (h.overruns,)),
+            Response("robot", "watchdog", "timeout", (self.watchdog.timeout,)),
+            Response("robot", "watchdog", "state", (self.watchdog.state,)),
+            Response("robot", "control", "owner", (self.control.owner_name,)),
+            Response("robot", "clients", "count", (h.clients,)),
+        ]
+        rows.extend(Response("robot", name, "state", (slot.state,))
+                    for name, slot in self.slots.items())
+        return rows

@@ -1,0 +1,473 @@
+"""Server layer: non-blocking MCP over TCP, serviced by the scheduler between ticks.
+
+This layer owns framing and parsing: it splits a client's bytes into messages, parses each
+one (`ramp.mcp.protocol`) and hands it down to the robot distribution layer as requests with
+a `RequestContext` (the client and the time the message was taken up), then writes the one
+answer line back. It decides nothing about the robot.
+
+One response line per request line, in order, per client. A client that stops reading is
+cut off once its unsent output passes a bound, so it can never block the loop or grow memory.
+Work is bounded by time (SPEC 2.2, *Bounded work*): a client's turn reads at most one small
+chunk, then answers its queued messages request by request until the tick's deadline (or a
+short slice, so other clients interleave); whatever is left, even half a message, is taken up
+again in its next turn, after the tick. A client that half-closes (sends FIN) is treated as
+gone for the watchdog and arbitration at once, but still receives every answer it is owed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import functools
+import logging
+import socket
+from collections import deque
+from collections.abc import Callable
+
+from ramp.layers.robot_distribution import Client, RequestContext, RobotDistribution
+from ramp.mcp.messages import Request, error_response
+from ramp.mcp.protocol import (
+    LineSplitter,
+    TooLong,
+    format_response,
+    parse_message,
+    too_long_response,
+)
+from ramp.scheduler import ScheduledTask, Scheduler
+
+log = logging.getLogger("ramp.server")
+
+# One read per turn: 64 KiB once held the loop for 300 ms (about 5 us per byte of bare newlines
+# or gets), long enough for the stall guard to stop every motor. The rest waits in the kernel,
+# and select reports the socket readable again on the next pass.
+READ_CHUNK = 1024
+#: Longest a client's turn lasts even when the tick is far off, so other clients interleave.
+TURN_S = 0.002
+#: Always room for a stop (SPEC 2.2): with every slot taken, a newcomer evicts the client
+#: silent longest if it has sent no complete message for this long and is neither the owner
+#: nor the feeder, so an operator can always connect and send robot:robot.stop=().
+EVICT_SILENCE_S = 5.0
+#: Out of file descriptors (EMFILE): stop accepting for this long instead of spinning (the
+#: listening socket stays readable, and accept failed 130,924 times in 10 s); the client
+#: waits in the listen backlog meanwhile.
+ACCEPT_BACKOFF_S = 0.1
+_OUT_OF_FDS = (errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM)
+#: Descriptors the process needs besides its clients: stdio, the listening socket, logs, and
+#: each bus's port (a pty or USB adapter, a CAN socket, a vendor library's own).
+FD_RESERVE = 32
+FD_PER_BUS = 4
+#: Messages up to this long are kept parsed (at most this many), keyed by their bytes.
+PARSE_CACHE_LINE = 256
+PARSE_CACHE_SIZE = 512
+
+
+class Connection(Client):
+    """One TCP client: its socket, input splitter, the message being answered, output."""
+
+    def __init__(self, sock: socket.socket, peer: str, max_line: int, now: float) -> None:
+        super().__init__(peer)
+        #: When its last complete message arrived (or when it connected).
+        self.last_message_at = now
+        self.sock = sock
+        self.fd = sock.fileno()
+        self.splitter = LineSplitter(max_line)
+        #: Complete messages read and not yet answered, oldest first.
+        self.queue: deque[bytes | TooLong] = deque()
+        #: The message being answered, request by request: its context, its requests, the
+        #: next one's index, the answer so far and what ends it (a syntax error, or nothing).
+        self.ctx: RequestContext | None = None
+        self.requests: tuple[Request, ...] = ()
+        self.index = 0
+        self.answer: list[bytes] = []
+        self.tail = b""
+        self.out = bytearray()
+        self.writing = False  # registered as a writer: output is waiting for room
+        self.closed = False
+        #: The client sent FIN: nothing more to read, answers still to deliver.
+        self.input_ended = False
+        self.lost_reported = False
+
+
+#: Observer hooks: (client, clock time, the message as it arrived, or TooLong) for every
+#: complete message in, and (client, clock time, the answer line) for every line out.
+MessageInHook = Callable[[Client, float, "bytes | TooLong"], None]
+MessageOutHook = Callable[[Client, float, bytes], None]
+
+
+class McpServer:
+    """Accepts clients, frames and parses their messages, hands each one down to the robot
+    layer with its request context, and writes the answers back."""
+
+    def __init__(self, scheduler: Scheduler, robot: RobotDistribution,
+                 host: str = "127.0.0.1", port: int = 5577, max_clients: int = 8,
+                 max_line: int = 4096, max_output: int = 1 << 20) -> None:
+        self.scheduler = scheduler
+        self.robot = robot
+        self.host = host
+        self.port = port
+        self.max_clients = max_clients
+        self.max_line = max_line
+        self.max_output = max_output
+        # max_line already bounds a message's work; every well-formed one fits (>= 8 bytes)
+        self.max_requests = max(256, max_line // 8 + 1)
+        self.clients: dict[int, Connection] = {}
+        self.sock: socket.socket | None = None
+        self.accepted = 0
+        self.refused = 0
+        self.evicted = 0
+        self.accept_failures = 0
+        #: Observer hooks (the flight recorder): None costs nothing.
+        self.on_message_in: MessageInHook | None = None
+        self.on_message_out: MessageOutHook | None = None
+        self._accept_paused_until: float | None = None
+        self._resume_task: ScheduledTask | None = None
+        self._accept_failures_logged = 0
+        self._now = scheduler.clock.now
+        self._pending_fds = scheduler.pending
+        self._too_long = format_response(too_long_response(max_line)).encode("ascii")
+        #: Parsed short messages by their bytes: parsing is a pure function of them, and a
+        #: client repeats the same few lines (a poll, a heartbeat) thousands of times.
+        self._parsed: dict[bytes, tuple[tuple[Request, ...], bytes]] = {}
+
+    @property
+    def address(self) -> tuple[str, int]:
+        assert self.sock is not None
+        host, port = self.sock.getsockname()[:2]
+        return host, port
+
+    def start(self) -> None:
+        family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
+        sock = socket.socket(family, socket.SOCK_STREAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind((self.host, self.port))
+        # Room for every client to connect at once (a burst past the backlog waits 1 s for
+        # TCP to retry its SYN).
+        sock.listen(max(64, min(self.max_clients + 16, socket.SOMAXCONN)))
+        sock.setblocking(False)
+        self.sock = sock
+        self.scheduler.add_reader(sock.fileno(), self._accept)
+
+    def _resume_accepting(self, now: float, dt: float) -> None:
+        """Scheduler task while accepting is paused: accept again once the back-off after
+        running out of descriptors is over (the task then removes itself)."""
+        if self._accept_paused_until is not None and now >= self._accept_paused_until:
+            self._accept_paused_until = None
+            if self._resume_task is not None:
+                self.scheduler.remove_task(self._resume_task)
+                self._resume_task = None
+            if self.sock is not None:
+                self.scheduler.add_reader(self.sock.fileno(), self._accept)
+
+    @property
+    def accept_paused(self) -> bool:
+        return self._accept_paused_until is not None
+
+    def close(self) -> None:
+        for conn in list(self.clients.values()):
+            self._drop(conn, "server shutting down")
+        if self.sock is not None:
+            self.scheduler.remove_reader(self.sock.fileno())
+            self.sock.close()
+            self.sock = None
+
+    # -- accepting ----------------------------------------------------------------------------
+    def _accept(self) -> None:
+        assert self.sock is not None
+        for _ in range(16):  # bounded: a connect storm cannot starve the tick
+            try:
+                sock, addr = self.sock.accept()
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as exc:
+                self._accept_failed(exc)
+                return
+            peer = f"{addr[0]}:{addr[1]}"
+            if len(self.clients) >= self.max_clients and not self._evict_for(peer):
+                self.refused += 1
+                log.warning("refused %s: already %d clients (server.max_clients), none silent "
+                            "for %.0f s that is neither owner nor feeder", peer,
+                            len(self.clients), EVICT_SILENCE_S)
+                _say_and_close(sock, b"robot:mcp.error=(busy,too many clients; at most "
+                               + str(self.max_clients).encode() + b")\n")
+                continue
+            sock.setblocking(False)
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            conn = Connection(sock, peer, self.max_line, self.scheduler.clock.now())
+            self.clients[conn.fd] = conn
+            self.accepted += 1
+            self.scheduler.add_reader(conn.fd, functools.partial(self._readable, conn))
+            log.info("client %s connected (%d of %d)", peer, len(self.clients),
+                     self.max_clients)
+
+    def _evict_for(self, newcomer: str) -> bool:
+        """Make room for a newcomer: close the client silent longest, if it has sent no
+        complete message for EVICT_SILENCE_S and is neither the owner nor the feeder."""
+        now = self.scheduler.clock.now()
+        silent = [c for c in self.clients.values()
+                  if now - c.last_message_at >= EVICT_SILENCE_S and not self.robot.protects(c)]
+        if not silent:
+            return False
+        victim = min(silent, key=lambda c: c.last_message_at)
+        quiet = now - victim.last_message_at
+        log.warning("client %s evicted: no message for %.1f s and %s needed its slot "
+                    "(server.max_clients %d)", victim.peer, quiet, newcomer, self.max_clients)
+        self.evicted += 1
+        self._drop(victim, f"evicted after {quiet:.1f} s of silence",
+                   farewell=b"robot:mcp.error=(busy,closed to make room for another client: "
+                   + f"no message for {quiet:.0f} s".encode() + b")\n")
+        return True
+
+    def _accept_failed(self, exc: OSError) -> None:
+        self.accept_failures += 1
+        if exc.errno not in _OUT_OF_FDS:
+            log.error("accept failed: %s", exc)
+            return
+        assert self.sock is not None
+        self.scheduler.remove_reader(self.sock.fileno())
+        self._accept_paused_until = self.scheduler.clock.now() + ACCEPT_BACKOFF_S
+        if self._resume_task is None:
+            self._resume_task = self.scheduler.add_task(
+                "server.accept", self.scheduler.rate_hz, self._resume_accepting)
+        if self.accept_failures - self._accept_failures_logged >= 100 or \
+                self._accept_failures_logged == 0:
+            log.error("accept failed: %s (%d clients connected); new clients wait in the "
+                      "backlog, accepting again in %.0f ms (%d failures so far)",
+                      exc.strerror or exc, len(self.clients), ACCEPT_BACKOFF_S * 1e3,
+                      self.accept_failures)
+            self._accept_failures_logged = self.accept_failures
+
+    # -- reading and answering ----------------------------------------------------------------
+    def _readable(self, conn: Connection) -> None:
+        """A client's turn: read one chunk unless work is left over, then answer in time."""
+        now = self._now()
+        end = min(self.scheduler.io_deadline, now + TURN_S)
+        if conn.ctx is None and not conn.queue:
+            try:
+                data = conn.sock.recv(READ_CHUNK)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as exc:
+                self._drop(conn, f"read error: {exc.strerror or exc}")
+                return
+            if not data:
+                self._end_input(conn)
+                return
+            messages = conn.splitter.feed(data)
+            if messages:
+                conn.last_message_at = now
+                conn.queue.extend(messages)
+        self._work(conn, now, end)
+        if conn.closed:
+            return
+        more = conn.ctx is not None or bool(conn.queue)
+        if more or conn.fd in self._pending_fds:
+            self.scheduler.set_pending(conn.fd, more)
+        self._flush(conn)
+
+    def _parse(self, msg: bytes) -> tuple[tuple[Request, ...], bytes]:
+        """A message's requests and what ends its answer (a syntax error, or nothing)."""
+        parsed = self._parsed.get(msg)
+        if parsed is None:
+            requests, error = parse_message(msg, max_requests=self.max_requests)
+            tail = format_response(error).encode("ascii") if error is not None else b""
+            parsed = (requests, tail)
+            if len(msg) <= PARSE_CACHE_LINE:
+                if len(self._parsed) >= PARSE_CACHE_SIZE:
+                    self._parsed.clear()
+                self._parsed[msg] = parsed
+        return parsed
+
+    def _work(self, conn: Connection, t: float, end: float) -> None:
+        """Answer queued messages request by request until `end` (at least one step).
+
+        A message of one request (or none) is one step; a longer one is answered a request
+        per step across turns (`conn.ctx` holds it meanwhile). Everything is looked up once
+        per turn: this loop runs for every message a client sends. The messages of one turn
+        share its request context: one client, and a time that is at most a turn (2 ms) old.
+        """
+        robot = self.robot
+        request, message, parse, now = robot.request, robot.message, self._parse, self._now
+        queue, out = conn.queue, conn.out
+        hook_in, hook_out = self.on_message_in, self.on_message_out
+        turn = RequestContext(conn, t)
+        while True:
+            ctx = conn.ctx
+            if ctx is not None:  # a message of several requests, one per step
+                try:
+                    part = request(ctx, conn.requests[conn.index])
+                except Exception as exc:
+                    # Whatever went wrong (a get property that raised), the message is owed
+                    # one line: otherwise the client's lines slip out of step.
+                    self._finish(conn, ctx, self._fault(conn, exc))
+                else:
+                    conn.index += 1
+                    if part:
+                        conn.answer.append(part)
+                    if conn.index == len(conn.requests):
+                        conn.answer.append(conn.tail)
+                        self._finish(conn, ctx, b"".join(conn.answer))
+            else:
+                if not queue:
+                    return
+                msg = queue.popleft()
+                ctx = turn
+                if hook_in is not None:
+                    hook_in(conn, t, msg)
+                message(ctx)
+                if isinstance(msg, TooLong):
+                    line = self._too_long
+                else:
+                    requests, line = parse(msg)  # line: what ends the answer (an error or b"")
+                    if len(requests) == 1:
+                        try:
+                            line = request(ctx, requests[0]) + line
+                        except Exception as exc:
+                            line = self._fault(conn, exc)
+                    elif requests:
+                        conn.ctx, conn.requests, conn.index, conn.answer, conn.tail = (
+                            RequestContext(conn, t), requests, 0, [], line)
+                        continue
+                out += line
+                out += b"\n"
+                if hook_out is not None:
+                    hook_out(conn, t, line)
+                if not queue:
+                    return  # (the usual turn: one message, answered)
+            t = now()
+            if t >= end or conn.closed:
+                return
+
+    def _finish(self, conn: Connection, ctx: RequestContext, line: bytes) -> None:
+        """The message's one response line."""
+        conn.ctx, conn.requests, conn.answer = None, (), []
+        if conn.closed:
+            return
+        conn.out += line
+        conn.out += b"\n"
+        if self.on_message_out is not None:
+            self.on_message_out(conn, ctx.now, line)
+
+    def answer_message(self, client: Client, msg: bytes | TooLong) -> bytes:
+        """One message's whole answer line (with its `\\n`), all at once, as a turn of the
+        server would write it: for tools and tests that have no socket."""
+        ctx = RequestContext(client, self._now())
+        self.robot.message(ctx)
+        if isinstance(msg, TooLong):
+            return self._too_long + b"\n"
+        requests, tail = self._parse(msg)
+        try:
+            parts = [self.robot.request(ctx, req) for req in requests]
+        except Exception as exc:
+            return self._fault(client, exc) + b"\n"
+        return b"".join(parts) + tail + b"\n"
+
+    def _fault(self, client: Client, exc: Exception) -> bytes:
+        log.error("could not answer a message from %s", client.peer, exc_info=exc)
+        return format_response(error_response(
+            "robot", "mcp", "fault", f"internal error {type(exc).__name__}")).encode("ascii")
+
+    def _end_input(self, conn: Connection) -> None:
+        """FIN from the client: it can command nothing more, but its answers are still owed.
+
+        Closing at once would throw away unsent output (`printf 'robot:robot.get=()\\n' | nc`
+        on a slow link); the socket closes when the output has drained.
+        """
+        conn.input_ended = True
+        self.scheduler.remove_reader(conn.fd)
+        if not conn.out:
+            self._drop(conn, "closed by client")
+            return
+        self._report_lost(conn)
+        self._flush(conn)
+
+    def _flush(self, conn: Connection) -> None:
+        if conn.closed:
+            return
+        out = conn.out
+        if out and not conn.writing and not conn.input_ended:  # the usual case: it all goes
+            try:
+                n = conn.sock.send(out)
+            except (BlockingIOError, InterruptedError):
+                n = 0
+            except OSError as exc:
+                self._drop(conn, f"write error: {exc.strerror or exc}")
+                return
+            if n == len(out):
+                out.clear()
+                return
+            del out[:n]
+        while out:
+            try:
+                n = conn.sock.send(out)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError as exc:
+                self._drop(conn, f"write error: {exc.strerror or exc}")
+                return
+            del out[:n]
+        if len(out) > self.max_output:
+            self._drop(conn, f"not reading its responses ({len(out)} bytes unsent)")
+            return
+        if out:
+            if not conn.writing:
+                conn.writing = True
+                self.scheduler.add_writer(conn.fd, functools.partial(self._flush, conn))
+        elif conn.input_ended:
+            self._drop(conn, "closed by client")
+        elif conn.writing:
+            conn.writing = False
+            self.scheduler.remove_writer(conn.fd)
+
+    def _drop(self, conn: Connection, why: str, farewell: bytes = b"") -> None:
+        if conn.closed:
+            return
+        conn.closed = True
+        self.scheduler.remove_reader(conn.fd)
+        self.scheduler.remove_writer(conn.fd)
+        self.clients.pop(conn.fd, None)
+        if farewell:
+            with contextlib.suppress(OSError):
+                conn.sock.send(farewell)
+        try:
+            conn.sock.close()
+        except OSError as exc:  # pragma: no cover
+            if exc.errno != errno.EBADF:
+                raise
+        log.info("client %s disconnected: %s", conn.peer, why)
+        self._report_lost(conn)
+
+    def _report_lost(self, conn: Connection) -> None:
+        """Tell the robot layer once that this client can no longer command or feed."""
+        if not conn.lost_reported:
+            conn.lost_reported = True
+            self.robot.client_lost(conn, self._now())
+
+
+def _say_and_close(sock: socket.socket, line: bytes) -> None:
+    with contextlib.suppress(OSError):
+        sock.setblocking(False)
+        sock.send(line)
+    sock.close()
+
+
+def ensure_fd_limit(max_clients: int, buses: int) -> str | None:
+    """Make sure this process may open the descriptors `max_clients` clients need: raise the
+    soft RLIMIT_NOFILE up to the hard one if it must. None when it may; otherwise why not
+    (an error for `server.max_clients`, checked before the supervisor starts)."""
+    import resource
+
+    needed = max_clients + FD_RESERVE + FD_PER_BUS * buses
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft == resource.RLIM_INFINITY or soft >= needed:
+        return None
+    if hard != resource.RLIM_INFINITY and hard < needed:
+        return (f"{max_clients} clients need about {needed} file descriptors, and this process "
+                f"may open at most {hard} (raise LimitNOFILE= in the service or `ulimit -n`, "
+                "or lower max_clients)")
+    try:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (needed, hard))
+    except (ValueError, OSError) as exc:
+        return f"cannot raise the file descriptor limit to {needed}: {exc}"
+    log.info("file descriptor limit raised from %d to %d for %d clients", soft, needed,
+             max_clients)
+    return None

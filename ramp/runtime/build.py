@@ -1,0 +1,112 @@
+"""`build(config, clock, bus_factory)`: the one place a robot is assembled from its config.
+
+`ramp run`, `ramp run --sim`, `ramp sim …` (the simulation rig), the tests' harness and the
+benchmarks all build their supervisor here; they differ only in the clock, the bus factory
+(real drivers, or `ramp.simulation.backplane`'s emulators) and an optional `Observer`. The
+config is data (`ramp.config`); everything that runs is made here, bottom up: buses and
+their channels (HAL), modules on those channels (functional and module distribution
+layers), the module registry, the watchdog and the robot layer, then the server.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from ramp.clock import Clock, MonotonicClock
+from ramp.config import BusConfig, Config
+from ramp.hal import driver_class
+from ramp.hal.interfaces import Bus
+from ramp.layers.module_distribution import BoundDevice, Module
+from ramp.layers.robot_distribution import (
+    Health,
+    ModuleRegistry,
+    ModuleSlot,
+    RobotDistribution,
+    Watchdog,
+)
+from ramp.layers.server import McpServer
+from ramp.modules import module_class
+from ramp.runtime.buses import BusManager
+from ramp.runtime.observers import Observer, overridden
+from ramp.runtime.supervisor import Supervisor
+from ramp.scheduler import Scheduler
+
+BusFactory = Callable[[BusConfig], Bus]
+
+
+def default_bus_factory(bc: BusConfig) -> Bus:
+    """The real driver named in YAML."""
+    return driver_class(bc.driver)(bc.name, bc.params)
+
+
+def build(config: Config, clock: Clock | None = None, bus_factory: BusFactory | None = None,
+          *, host: str | None = None, port: int | None = None,
+          observer: Observer | None = None) -> Supervisor:
+    """A supervisor for `config`, not started yet (`start()`, then `settle()`, then run its
+    scheduler). `host`/`port` override the config's server address (`--host`, `--port`).
+    Raises ConfigError for what only building can find (two devices on one channel ...)."""
+    clock = clock or MonotonicClock()
+    scheduler = Scheduler(clock, config.rate_hz, stall_limit=config.stall_limit)
+    factory = bus_factory or default_bus_factory
+    buses = {name: factory(bc) for name, bc in config.buses.items()}
+
+    slots: dict[str, ModuleSlot] = {}
+    for name, mc in config.modules.items():
+        devices = {
+            dev: BoundDevice(buses[dc.bus].channel(dc.kind, f"{name}.{dev}", dc.channel),
+                             dc.params)
+            for dev, dc in mc.devices.items()
+        }
+        module: Module = module_class(mc.type)(name, devices, mc.settings)
+        used = tuple(sorted({dc.bus for dc in mc.devices.values()}))
+        slots[name] = ModuleSlot(name, module, used)
+    registry = ModuleRegistry(slots)
+
+    # The layers call back into the supervisor, which is made last (it holds them all).
+    def health() -> Health:
+        return sup.health()
+
+    def buses_changed(now: float) -> None:
+        sup.buses_changed(now)
+
+    manager = BusManager(buses, scheduler, buses_changed)
+    robot = RobotDistribution(registry, Watchdog(config.watchdog_timeout), health,
+                              scheduler.stats)
+    server = McpServer(scheduler, robot,
+                       host=host if host is not None else config.server.host,
+                       port=port if port is not None else config.server.port,
+                       max_clients=config.server.max_clients, max_line=config.server.max_line,
+                       max_output=config.server.max_output)
+    sup = Supervisor(config, clock, scheduler, manager, registry, robot, server, observer)
+    scheduler.on_stall = sup.on_stall
+    if observer is not None:
+        _connect(sup, observer)
+    return sup
+
+
+def _connect(sup: Supervisor, observer: Observer) -> None:
+    """Connect the observer's overridden points to the layers' hooks (see
+    `ramp.runtime.observers`); the others stay None and cost nothing."""
+    now = sup.clock.now
+    if overridden(observer, "message_in"):
+        sup.server.on_message_in = lambda client, t, msg: observer.message_in(t, client, msg)
+    if overridden(observer, "message_out"):
+        sup.server.on_message_out = lambda client, t, line: observer.message_out(t, client, line)
+    if overridden(observer, "command"):
+        for name, bus in sup.buses.items():
+            bus.on_command = (lambda bus_name: lambda channel, value: observer.command(
+                now(), bus_name, channel, value))(name)
+    if overridden(observer, "module_state"):
+        for slot in sup.slots.values():
+            slot.on_change = lambda module, state, reason, t: observer.module_state(
+                t, module, state, reason)
+    if overridden(observer, "watchdog"):
+        sup.watchdog.on_change = lambda state, why, t: observer.watchdog(t, state, why)
+    if overridden(observer, "control"):
+        sup.robot.on_control = lambda owner, peer, t: observer.control(t, owner, peer)
+    if overridden(observer, "bus_fault"):
+        sup.bus_manager.on_fault = lambda bus, reason, t: observer.bus_fault(t, bus, reason)
+    if overridden(observer, "tick"):
+        sup.scheduler.on_tick = observer.tick
+    if overridden(observer, "tick_done"):
+        sup.scheduler.on_tick_done = observer.tick_done

@@ -1,0 +1,218 @@
+"""The buses of a running supervisor: opened off the loop, ticked, watched, retried.
+
+This is where a device fault enters the layers above, by one route: a driver raises
+`DeviceError` from its bus's `tick` (or records one in `failure`, seen at once when the loop
+finds its descriptor readable), the bus is closed and retried about once a second, and the
+module registry faults every module that uses it (`ramp.layers.robot_distribution.registry`:
+entering `fault` stops the module and logs). A request never sees an I/O error.
+
+A bus with a descriptor (`Bus.fileno()`: a serial port, a CAN socket) is watched by the loop
+while it is open, so a hang-up or input is handled the moment it happens instead of being
+polled for every tick.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+from ramp.errors import DeviceError
+from ramp.hal.interfaces import Bus
+from ramp.runtime.bus_opener import BusOpener
+from ramp.scheduler import Scheduler
+
+log = logging.getLogger("ramp.supervisor")
+
+RETRY_PERIOD = 1.0  # seconds between attempts to reopen a missing device
+
+#: Observer hook: (bus, reason, clock time) when a bus fails and is closed.
+FaultHook = Callable[[str, str, float], None]
+
+
+@dataclass
+class BusHealth:
+    """Why a bus is closed, and when to try it again."""
+
+    reason: str = "not opened yet"
+    next_retry: float = 0.0
+    faults: int = 0
+
+
+class BusManager:
+    """Every bus of the robot, by name."""
+
+    def __init__(self, buses: Mapping[str, Bus], scheduler: Scheduler,
+                 on_change: Callable[[float], None]) -> None:
+        self.buses = dict(buses)
+        self.scheduler = scheduler
+        self.clock = scheduler.clock
+        self.health = {name: BusHealth() for name in self.buses}
+        self.opener = BusOpener(inline=self.clock.virtual)
+        #: Called after a bus opened, failed or changed readiness (the registry updates).
+        self._on_change = on_change
+        #: Observer hook (the flight recorder): None costs nothing.
+        self.on_fault: FaultHook | None = None
+        self._ready = {name: False for name in self.buses}
+        self._waiting = True  # some open bus is not ready yet: each tick asks again
+        self._watched: dict[str, int] = {}
+        for bus in self.buses.values():
+            bus.gate = scheduler.on_time  # motion computed before a stall never goes out
+
+    # -- what the registry asks ---------------------------------------------------------------
+    def ready(self, name: str) -> bool:
+        return self._ready[name]
+
+    def why(self, name: str) -> str:
+        return self.health[name].reason or "not ready"
+
+    # -- lifecycle ----------------------------------------------------------------------------
+    def start(self, now: float) -> None:
+        """Open every bus, in parallel (each open has its own thread); missing ones are
+        retried later."""
+        for name, bus in self.buses.items():
+            self._try_open(name, bus, now)
+        for name, bus in self.buses.items():
+            if self.opener.busy(name):  # a second look once all have started
+                self._try_open(name, bus, now)
+        self._refresh(now, force=True)
+
+    def settled(self) -> bool:
+        """Every open bus answers (boards that attach asynchronously included)."""
+        return all(b.ready() for b in self.buses.values() if b.is_open)
+
+    def close_all(self) -> None:
+        """Zeros on every wire, then every port closes. Idempotent."""
+        self.opener.cancel_all()
+        for name, bus in self.buses.items():
+            self._unwatch(name)
+            bus.close()
+
+    def any_open(self) -> bool:
+        return any(b.is_open for b in self.buses.values())
+
+    # -- scheduler tasks ----------------------------------------------------------------------
+    def tick(self, now: float, dt: float) -> None:
+        """Every base tick: collect opens that were in flight, tick every open bus."""
+        if self.opener.in_flight:
+            self._collect_opens(now)
+        for name, bus in self.buses.items():
+            if not bus.is_open:
+                continue
+            try:
+                bus.tick(now, dt)
+            except DeviceError as exc:
+                self.fault(name, exc, now)
+        if self._waiting:
+            self._refresh(now)
+
+    def retry(self, now: float, dt: float) -> None:
+        """About once a second: reopen what is closed."""
+        for name, bus in self.buses.items():
+            if (not bus.is_open and not self.opener.busy(name)
+                    and now >= self.health[name].next_retry
+                    and self._try_open(name, bus, now)):
+                log.info("bus %s is back", name)
+        self._refresh(now)
+
+    # -- faults -------------------------------------------------------------------------------
+    def fault(self, name: str, exc: DeviceError, now: float) -> None:
+        """The one route of a device fault: close the bus, retry later, let the registry
+        fault its modules."""
+        health = self.health[name]
+        health.faults += 1
+        health.reason = exc.detail
+        health.next_retry = now + RETRY_PERIOD
+        log.error("bus %s fault: %s", name, exc.detail)
+        self._unwatch(name)
+        self.buses[name].close()
+        if self.on_fault is not None:
+            self.on_fault(name, exc.detail, now)
+        self._refresh(now)
+
+    # -- stops --------------------------------------------------------------------------------
+    def zeros_everywhere(self) -> None:
+        """Zeros on every open wire now (the stall handler's first act)."""
+        for name, bus in self.buses.items():
+            if not bus.is_open:
+                continue
+            try:
+                bus.stop_motors()
+            except Exception as exc:  # noqa: BLE001 - every other bus must still stop
+                log.error("bus %s: could not stop motors: %s", name, exc)
+
+    def zeros_from_another_thread(self, lock_wait: float) -> None:
+        """The stall guard's last resort: zeros through every driver the loop is not inside
+        (see the bus lock in `ramp.hal.interfaces`)."""
+        for name, bus in self.buses.items():
+            try:
+                if not bus.try_stop_motors(lock_wait):
+                    log.error("bus %s: the tick loop is stuck inside its driver; its motors "
+                              "are left to the controller's own timeout", name)
+            except Exception as exc:  # noqa: BLE001 - every other bus must still stop
+                log.error("bus %s: could not stop motors: %s", name, exc)
+
+    # -- internals ----------------------------------------------------------------------------
+    def _refresh(self, now: float, force: bool = False) -> None:
+        """Tell the registry when a bus's readiness changed (boards attach, buses fail)."""
+        changed = force
+        for name, bus in self.buses.items():
+            ready = bus.ready()
+            if ready != self._ready[name]:
+                self._ready[name] = ready
+                changed = True
+        # An open bus becomes ready only in its own tick (a board attaches); it stops being
+        # ready only by failing, which refreshes too: with every open bus ready, the ticks
+        # need not ask again.
+        self._waiting = any(b.is_open and not self._ready[n] for n, b in self.buses.items())
+        if changed:
+            self._on_change(now)
+
+    def _try_open(self, name: str, bus: Bus, now: float) -> bool:
+        """Open a bus without holding the loop (see `ramp.runtime.bus_opener`); True once it
+        is open (and watched). A failure waits RETRY_PERIOD before the next try; an open still
+        running is looked at again on the next tick."""
+        result = self.opener.open(name, bus, now)
+        if result is False:
+            return False
+        health = self.health[name]
+        if isinstance(result, DeviceError):
+            if health.reason != result.detail:
+                log.warning("bus %s (%s) unavailable: %s; retrying every %.0f s", name,
+                            bus.driver_name, result.detail, RETRY_PERIOD)
+            health.reason = result.detail
+            health.next_retry = now + RETRY_PERIOD
+            return False
+        health.reason = ""
+        log.info("bus %s (%s) open", name, bus.driver_name)
+        self._watch(name, bus)
+        self._waiting = True  # is it ready yet? the next refresh says
+        return True
+
+    def _collect_opens(self, now: float) -> None:
+        """Opens that were still running: take their results as soon as they are in."""
+        for name, bus in self.buses.items():
+            was_down = self.health[name].reason != BusHealth.reason
+            if self.opener.busy(name) and self._try_open(name, bus, now) and was_down:
+                log.info("bus %s is back", name)
+
+    def _watch(self, name: str, bus: Bus) -> None:
+        """Wait on the bus's descriptor in the loop while it is open."""
+        fd = bus.fileno()
+        if fd is None:
+            return
+        self._watched[name] = fd
+        bus.watched = True
+        self.scheduler.add_reader(fd, lambda: self._drain(name, bus))
+
+    def _unwatch(self, name: str) -> None:
+        fd = self._watched.pop(name, None)
+        if fd is not None:
+            self.scheduler.remove_reader(fd)
+            self.buses[name].watched = False
+
+    def _drain(self, name: str, bus: Bus) -> None:
+        now = self.clock.now()
+        bus.drain(now)
+        if bus.failure is not None:
+            self.fault(name, bus.failure, now)

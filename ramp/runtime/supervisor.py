@@ -1,0 +1,174 @@
+"""The Supervisor: every layer of one robot, running on one scheduler.
+
+One object owns everything (no singletons), so each test builds a fresh one; it is built
+by `ramp.runtime.build` (the same builder for `ramp run`, `ramp sim`, the tests and the
+benchmarks) and owns only the lifecycle and the robot-wide events that cut across the
+layers: start and settle, shutdown, a stalled loop, the stall guard's last resort.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+
+from ramp.clock import Clock
+from ramp.config import Config
+from ramp.hal.interfaces import Bus
+from ramp.layers.robot_distribution import (
+    Health,
+    ModuleRegistry,
+    ModuleSlot,
+    RobotDistribution,
+    Watchdog,
+)
+from ramp.layers.server import McpServer
+from ramp.mcp.messages import Response
+from ramp.runtime.buses import BusManager
+from ramp.runtime.observers import Observer
+from ramp.runtime.stall_guard import StallGuard
+from ramp.scheduler import Scheduler
+
+log = logging.getLogger("ramp.supervisor")
+
+
+class Supervisor:
+    """The running robot: scheduler, buses, module registry, robot layer, server."""
+
+    def __init__(self, config: Config, clock: Clock, scheduler: Scheduler,
+                 buses: BusManager, registry: ModuleRegistry, robot: RobotDistribution,
+                 server: McpServer, observer: Observer | None = None) -> None:
+        self.config = config
+        self.clock = clock
+        self.scheduler = scheduler
+        self.bus_manager = buses
+        self.registry = registry
+        self.robot = robot
+        self.server = server
+        self.observer = observer
+        self.stall_guard = StallGuard(self, config.stall_limit)
+        self.started_at = 0.0
+        self.running = False
+
+    # -- what tests, tools and observers look at ------------------------------------------------
+    @property
+    def buses(self) -> dict[str, Bus]:
+        return self.bus_manager.buses
+
+    @property
+    def slots(self) -> dict[str, ModuleSlot]:
+        return self.registry.slots
+
+    @property
+    def watchdog(self) -> Watchdog:
+        return self.robot.watchdog
+
+    def health_rows(self) -> list[Response]:
+        """`robot:robot.get=()`'s rows (what a recorder samples at 10 Hz)."""
+        return self.robot.health_rows()
+
+    def module_rows(self, name: str) -> list[Response]:
+        """A module's get rows while it is attached, else none."""
+        slot = self.slots.get(name)
+        if slot is None or slot.state != "ok":
+            return []
+        return slot.module.rows()
+
+    def health(self) -> Health:
+        s = self.scheduler.stats
+        return Health(uptime=self.clock.now() - self.started_at, rate_hz=self.scheduler.rate_hz,
+                      late_us=s.percentiles(), overruns=s.overruns,
+                      clients=len(self.server.clients))
+
+    # -- lifecycle ----------------------------------------------------------------------------
+    def start(self) -> None:
+        """Open every bus (missing ones are retried later), attach modules, start serving."""
+        now = self.clock.now()
+        self.started_at = now
+        self.bus_manager.start(now)
+        sched = self.scheduler
+        sched.add_task("buses", sched.rate_hz, self.bus_manager.tick)
+        sched.add_task("watchdog", sched.rate_hz, self.robot.tick)
+        sched.add_task("hotplug", self._divisor_rate(1.0), self.bus_manager.retry)
+        for slot in self.slots.values():
+            for task in slot.module.tasks():
+                rate = self._divisor_rate(task.rate_hz)
+                if abs(rate - task.rate_hz) > 1e-9:
+                    log.info("task %s.%s runs at %g Hz (asked %g Hz; base rate %g Hz)",
+                             slot.name, task.name, rate, task.rate_hz, sched.rate_hz)
+                sched.add_task(f"{slot.name}.{task.name}", rate,
+                               _only_attached(slot, task.run))
+        self.server.start()
+        self.running = True
+        if self.observer is not None:
+            self.observer.started(self)
+
+    def settle(self, limit: float = 2.0, open_limit: float = 0.5) -> None:
+        """Run the loop (serving) until every opened bus reports ready, at most `limit` s.
+
+        Boards such as ODrives and Phidgets open at once but answer a moment later; the ready
+        line waits for them so a client connecting right after sees its modules attached.
+        An open still running after `open_limit` (a device that does not answer) is not
+        waited for: its modules attach when it is done.
+        """
+        start = self.clock.now()
+        end = start + limit
+        opener = self.bus_manager.opener
+
+        def settled() -> bool:
+            now = self.clock.now()
+            opening = opener.in_flight and now < start + open_limit
+            return now >= end or (not opening and self.bus_manager.settled())
+
+        self.scheduler.run(settled)
+
+    def shutdown(self) -> None:
+        """Stop every motor (zeros on the wire), close devices and the server. Idempotent."""
+        if not self.running and not self.bus_manager.any_open():
+            return
+        if self.running and self.observer is not None:
+            self.observer.stopping(self)
+        self.running = False
+        self.robot.stop_all("shutdown", self.clock.now())
+        self.bus_manager.close_all()  # zeros on the wire first, then the ports close
+        self.server.close()
+
+    # -- stalls -------------------------------------------------------------------------------
+    def stop_all_motors(self, alive_mark: float, lock_wait: float = 0.02) -> None:
+        """Last resort (the stall guard's thread, the loop silent since `alive_mark`): zeros
+        straight to every driver the loop is not inside. The loop, when it runs again, treats
+        this as a stall, so the layers above agree with the wire."""
+        self.scheduler.request_stall_stop(alive_mark)
+        self.bus_manager.zeros_from_another_thread(lock_wait)
+
+    def on_stall(self, gap: float, unit: str) -> None:
+        """The loop lost more than `stall_limit` (SPEC 2.2). Before anything else goes out:
+        zeros on every wire, which also turns every queued command and every refresh value
+        into a zero; then every module stops and the watchdog trips."""
+        now = self.clock.now()
+        self.bus_manager.zeros_everywhere()
+        self.robot.stalled("tick loop stalled", now)
+        self.stall_guard.loop_stalled(gap, unit)
+        if self.observer is not None:
+            self.observer.stall(now, gap, unit)
+
+    # -- buses and modules --------------------------------------------------------------------
+    def buses_changed(self, now: float) -> None:
+        """A bus opened, failed or changed readiness: attach or fault the modules on it."""
+        self.robot.changes += 1  # a module may stop (fault) outside a tick: the version moves
+        self.registry.update(now, self.bus_manager.ready, self.bus_manager.why)
+        if not self.robot.any_moving():
+            self.robot.watchdog.disarm(now)
+
+    def _divisor_rate(self, wanted_hz: float) -> float:
+        """The rate nearest `wanted_hz` that divides the base rate (at most the base rate)."""
+        divisor = max(1, round(self.scheduler.rate_hz / wanted_hz))
+        return self.scheduler.rate_hz / divisor
+
+
+def _only_attached(slot: ModuleSlot,
+                   run: Callable[[float, float], None]) -> Callable[[float, float], None]:
+    def task(now: float, dt: float) -> None:
+        if slot.state == "ok":
+            run(now, dt)
+    return task
+
