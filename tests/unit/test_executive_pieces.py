@@ -1,5 +1,6 @@
 """The executive's pieces on their own: its settings, the pose tracker, the start region's
-plans, the plan home's last leg, and the choice of digging spots."""
+plans, the plan home's last leg, the choice of digging spots, and driving on along a plan
+from a pose a little off it."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import pytest
 
 from firmware_like.marte import MarteWorld
 from ramp.autonomy.config import MISSION_FIELDS, parse_config
+from ramp.autonomy.executive.drive import rejoin
 from ramp.autonomy.executive.kit import Kit
 from ramp.autonomy.executive.plan import (
     START_REGION,
@@ -27,7 +29,15 @@ from ramp.autonomy.executive.scan import TIGHT_NOTE, build_map
 from ramp.autonomy.executive.settings import ExecutiveSettings, settings_from
 from ramp.autonomy.odometry import Odometry
 from ramp.autonomy.perception.pipeline import Obstacle
-from ramp.autonomy.planning import ArenaMap, DigSites, Disc, Planner, Pose, plan_to_dock
+from ramp.autonomy.planning import (
+    ArenaMap,
+    DigSites,
+    Disc,
+    Path,
+    Planner,
+    Pose,
+    plan_to_dock,
+)
 from ramp.autonomy.planning.geometry import footprint_clearance
 from ramp.autonomy.planning.path import end_yaw, swept_poses
 from ramp.simulation.campaign import combination
@@ -200,3 +210,29 @@ def test_a_layout_only_the_detected_discs_let_through_is_planned_on_them_as_dete
     assert ctx.planner is not grown and ctx.notes[TIGHT_NOTE]
     assert [d.radius for d in ctx.rocks] == pytest.approx([0.125, 0.06, 0.15])
     assert ctx.plan is not None and ctx.plan.ok and ctx.dig_spot is not None
+
+
+# -- driving on ---------------------------------------------------------------------------------
+def test_a_plan_is_rejoined_from_a_pose_a_little_off_it_at_the_next_waypoint_ahead() -> None:
+    first = Path(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]), final_yaw=None)
+    second = Path(np.array([[1.0, 1.0], [1.0, 0.5]]), reverse=True, final_yaw=0.5)
+    legs = rejoin([first, second], Pose(0.6, 0.02, 0.0))
+    assert legs[1] is second
+    assert legs[0].points.tolist() == [[0.6, 0.02], [1.0, 0.0], [1.0, 1.0]]
+    assert not legs[0].reverse
+    # At a corner already: straight on to the waypoint after it.
+    legs = rejoin([first], Pose(1.005, 0.0, 0.0))
+    assert legs[0].points.tolist() == [[1.005, 0.0], [1.0, 1.0]]
+    # Past the end of the last leg: the end is still where it goes, with its final turn.
+    legs = rejoin([second], Pose(1.02, 0.45, 0.0))
+    assert legs[0].points.tolist() == [[1.02, 0.45], [1.0, 0.5]]
+    assert legs[0].reverse and legs[0].final_yaw == 0.5
+
+
+def test_the_planner_accepts_a_rejoined_plan_only_as_clear_as_one_it_would_make() -> None:
+    rock = Disc(2.0, 1.94, 0.15)
+    planner = Planner(ArenaMap(obstacles=(rock,)))
+    clear = [Path(np.array([[1.0, 0.9], [3.0, 0.9]]))]
+    assert planner.accepts(clear, 0.0)
+    grazing = [Path(np.array([[1.0, 1.94 - 0.15 - 0.375 - 0.01], [3.0, 1.40]]))]
+    assert not planner.accepts(grazing, 0.0)

@@ -58,7 +58,9 @@ class CrossToDig(Step):
         if self.driver is None:
             if ctx.plan is None or not ctx.plan.ok or ctx.dig_spot is None:
                 return Status.failed("no plan to a digging spot")
-            self.driver = PlanDriver(self, ctx.plan.legs, replan=self._plan)
+            assert ctx.planner is not None
+            self.driver = PlanDriver(self, ctx.plan.legs, replan=self._plan,
+                                     check=ctx.planner.accepts)
         return self.driver.tick(now)
 
     def end(self) -> None:
@@ -84,8 +86,9 @@ class CrossHome(Step):
         if self.driver is None:
             if ctx.plan is None or not ctx.plan.ok:
                 return Status.failed("no plan home")
+            assert ctx.planner is not None
             self.driver = PlanDriver(self, ctx.plan.legs, replan=self._plan,
-                                     fix_before_reverse=True)
+                                     fix_before_reverse=True, check=ctx.planner.accepts)
         return self.driver.tick(now)
 
     def end(self) -> None:

@@ -14,7 +14,10 @@ It plans again from where the robot really is (`replan`, when given) after a fix
 turn (the planner then checks the turn's sweep from the true pose: the follower stops a few
 centimetres off the planned corner, and a turn near a wall has no more room than that),
 after a fix that puts the robot more than `REPLAN_OFF_M` off the leg it drives, and after it
-went off the path. A fix mid-stretch that agrees with the plan keeps it, so the route does not
+went off the path. When no new plan is found from there (a way through a gap a few centimetres
+wider than the robot, found from a pose a few centimetres away), the rest of the old plan,
+joined from where the robot stands, is driven on if it passes the same exact check (`check`,
+`Planner.accepts`). A fix mid-stretch that agrees with the plan keeps it, so the route does not
 change its mind at every stop. A fix
 that fails is tried once more (re-levelled first when the localizer says where level is);
 still lost -> `lost`, and it never drives without a pose: the robot stops first.
@@ -49,6 +52,7 @@ from ramp.statemachine import Status
 log = logging.getLogger("ramp.autonomy.executive")
 
 Replan = Callable[[Pose], PlanResult]
+Check = Callable[[Sequence[Path], float], bool]  # legs, start yaw -> clear enough to drive
 
 DRIVING, FIXING = "driving", "fixing"
 TURN_FIX_M = 0.25  # moved at least this far since the last fix: localize before turning
@@ -63,13 +67,14 @@ class PlanDriver:
     def __init__(self, step: Step, legs: Sequence[Path], *, replan: Replan | None = None,
                  final_fix: bool = False, fix_before_reverse: bool = False,
                  config: FollowerConfig | None = None, max_replans: int | None = None,
-                 relocalize_every_m: float | None = None) -> None:
+                 relocalize_every_m: float | None = None, check: Check | None = None) -> None:
         if not legs:
             raise ValueError("nothing to drive: the plan has no legs")
         self.step_ = step
         self.kit: Kit = step.kit
         self.legs = list(legs)
         self.replan = replan
+        self.check = check
         self.final_fix = final_fix
         self.fix_before_reverse = fix_before_reverse
         self.config = config or self.kit.follower_config()
@@ -183,9 +188,14 @@ class PlanDriver:
                                         or off_track(self.leg, here) > REPLAN_OFF_M):
             self._off_path = self._before_turn = False
             result = self.replan(here)
+            legs = list(result.legs)
             if not result.ok:
-                return Status.failed(f"no plan from {describe(pose)}: {result.reason}")
-            self.legs = list(result.legs)
+                legs = rejoin(self.legs[self._leg:], here)
+                if self.check is None or not legs or not self.check(legs, here.yaw):
+                    return Status.failed(f"no plan from {describe(pose)}: {result.reason}")
+                log.info("drive: no new plan from %s (%s); driving on along the old one",
+                         describe(pose), result.reason)
+            self.legs = legs
             self._leg = 0
             self._follower = PathFollower(self.leg, self.config)
             self._last_status = ""
@@ -221,3 +231,28 @@ def off_track(leg: Path, pose: Pose) -> float:
     t = np.clip(((p - a) * ab).sum(axis=1) / length2, 0.0, 1.0)
     nearest = a + ab * t[:, None]
     return float(np.hypot(*(nearest - p).T).min())
+
+
+def rejoin(legs: Sequence[Path], pose: Pose) -> list[Path]:
+    """The rest of `legs` (the first being driven) from `pose`: straight to the first
+    waypoint of the first leg ahead of the nearest point on it, then on as planned."""
+    if not legs:
+        return []
+    first = legs[0]
+    pts = first.points
+    p = np.array([pose.x, pose.y])
+    if len(pts) < 2:
+        ahead = pts
+    else:
+        a, b = pts[:-1], pts[1:]
+        ab = b - a
+        length2 = np.maximum((ab * ab).sum(axis=1), 1e-12)
+        t = np.clip(((p - a) * ab).sum(axis=1) / length2, 0.0, 1.0)
+        k = int(np.argmin(np.hypot(*(a + ab * t[:, None] - p).T)))
+        ahead = pts[k + 1:]
+    if len(ahead) and float(np.hypot(*(ahead[0] - p))) < 0.01:
+        ahead = ahead[1:]
+    if not len(ahead):
+        ahead = pts[-1:]
+    joined = Path(np.vstack([p, ahead]), reverse=first.reverse, final_yaw=first.final_yaw)
+    return [joined, *legs[1:]]

@@ -112,6 +112,14 @@ class Planner:
     def can_spin_at(self, x: float, y: float) -> bool:
         return self._levels[0].can_spin_at(x, y)
 
+    def accepts(self, legs: Sequence[Path], start_yaw: float) -> bool:
+        """True when driving `legs` from a pose of `start_yaw` keeps the footprint as far
+        from everything as the planner's loosest plan may (the check a plan it makes
+        passes): a plan made from a pose a few centimetres away, driven on from here."""
+        level = self._levels[-1]
+        clear, _pose = level.legs_clearance(legs, start_yaw)
+        return clear >= level.config.check_margin_m - LATTICE_TOLERANCE_M
+
     def plan(self, start: Pose, goal: Point, goal_yaw: float | None = None) -> PlanResult:
         """Legs from `start` to `goal` (then turned to `goal_yaw` if given), or why not."""
         first = self._levels[0].plan(start, goal, goal_yaw)
