@@ -44,9 +44,9 @@ class PrepareForScan(Step):
         if self.driver is not None:
             self.driver.cancel()
 
-    def _plan(self, pose: Pose) -> PlanResult:
+    def _plan(self, pose: Pose, headings: bool = True) -> PlanResult:
         assert PrepareForScan.planners is not None
-        return plan_vantage(self.kit, PrepareForScan.planners, pose)
+        return plan_vantage(self.kit, PrepareForScan.planners, pose, headings=headings)
 
 
 class CrossToDig(Step):
@@ -67,11 +67,11 @@ class CrossToDig(Step):
         if self.driver is not None:
             self.driver.cancel()
 
-    def _plan(self, pose: Pose) -> PlanResult:
+    def _plan(self, pose: Pose, headings: bool = True) -> PlanResult:
         ctx = self.ctx
         assert ctx.planner is not None and ctx.dig_spot is not None
         spot = ctx.dig_spot.pose
-        result = ctx.planner.plan(pose, spot.xy, goal_yaw=spot.yaw)
+        result = ctx.planner.plan(pose, spot.xy, goal_yaw=spot.yaw, headings=headings)
         if result.ok:
             ctx.plan = result
         return result
@@ -95,10 +95,10 @@ class CrossHome(Step):
         if self.driver is not None:
             self.driver.cancel()
 
-    def _plan(self, pose: Pose) -> PlanResult:
+    def _plan(self, pose: Pose, headings: bool = True) -> PlanResult:
         ctx = self.ctx
         assert ctx.planner is not None
-        result, dock = plan_home(ctx.planner, pose)
+        result, dock = plan_home(ctx.planner, pose, headings=headings)
         if result.ok:
             ctx.plan = result
             ctx.dock = dock  # type: ignore[assignment]

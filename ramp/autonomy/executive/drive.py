@@ -14,11 +14,12 @@ It plans again from where the robot really is (`replan`, when given) after a fix
 turn (the planner then checks the turn's sweep from the true pose: the follower stops a few
 centimetres off the planned corner, and a turn near a wall has no more room than that),
 after a fix that puts the robot more than `REPLAN_OFF_M` off the leg it drives, and after it
-went off the path. When no new plan is found from there (a way through a gap a few centimetres
-wider than the robot, found from a pose a few centimetres away), the rest of the old plan,
-joined from where the robot stands, is driven on if it passes the same exact check (`check`,
-`Planner.accepts`). A fix mid-stretch that agrees with the plan keeps it, so the route does not
-change its mind at every stop. A fix
+went off the path. When the grid finds no new plan from there (a way through a gap a few
+centimetres wider than the robot, found by the search over headings from a pose a few
+centimetres away), the rest of the old plan, joined from where the robot stands, is driven on
+if it passes the same exact check (`check`, `Planner.accepts`); only if it does not is the
+search over headings (seconds of work where it finds nothing) run again. A fix mid-stretch
+that agrees with the plan keeps it, so the route does not change its mind at every stop. A fix
 that fails is tried once more (re-levelled first when the localizer says where level is);
 still lost -> `lost`, and it never drives without a pose: the robot stops first.
 
@@ -51,7 +52,7 @@ from ramp.statemachine import Status
 
 log = logging.getLogger("ramp.autonomy.executive")
 
-Replan = Callable[[Pose], PlanResult]
+Replan = Callable[[Pose, bool], PlanResult]  # from here; may it search over headings
 Check = Callable[[Sequence[Path], float], bool]  # legs, start yaw -> clear enough to drive
 
 DRIVING, FIXING = "driving", "fixing"
@@ -187,19 +188,29 @@ class PlanDriver:
         if self.replan is not None and (self._off_path or self._before_turn
                                         or off_track(self.leg, here) > REPLAN_OFF_M):
             self._off_path = self._before_turn = False
-            result = self.replan(here)
-            legs = list(result.legs)
-            if not result.ok:
-                legs = rejoin(self.legs[self._leg:], here)
-                if self.check is None or not legs or not self.check(legs, here.yaw):
-                    return Status.failed(f"no plan from {describe(pose)}: {result.reason}")
-                log.info("drive: no new plan from %s (%s); driving on along the old one",
-                         describe(pose), result.reason)
+            legs = self._plan_from(here)
+            if isinstance(legs, str):
+                return Status.failed(f"no plan from {describe(pose)}: {legs}")
             self.legs = legs
             self._leg = 0
             self._follower = PathFollower(self.leg, self.config)
             self._last_status = ""
         return Status.running()
+
+    def _plan_from(self, here: Pose) -> list[Path] | str:
+        """Legs from `here`: a new plan on the grid, else the old one rejoined if it passes
+        the exact check, else a new plan searched over headings too; or why there is none."""
+        assert self.replan is not None
+        result = self.replan(here, False)
+        if result.ok:
+            return list(result.legs)
+        legs = rejoin(self.legs[self._leg:], here)
+        if self.check is not None and legs and self.check(legs, here.yaw):
+            log.info("drive: no new plan on the grid from %s (%s); driving on along the "
+                     "old one", describe_pose(here), result.reason)
+            return legs
+        result = self.replan(here, True)
+        return list(result.legs) if result.ok else result.reason
 
     def _drive(self, speed: int, direction: float, now: float) -> None:
         robot = self.kit.robot
@@ -217,6 +228,10 @@ class PlanDriver:
             self.kit.robot.halt_base()
             self._sent = (0, 0.0)
         self.kit.robot.moving = False
+
+
+def describe_pose(pose: Pose) -> str:
+    return f"x {pose.x:.2f} y {pose.y:.2f} yaw {math.degrees(pose.yaw):.1f} deg"
 
 
 def off_track(leg: Path, pose: Pose) -> float:

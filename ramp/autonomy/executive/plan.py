@@ -40,6 +40,7 @@ from ramp.autonomy.planning import (
     Pose,
     plan_to_dock,
 )
+from ramp.autonomy.planning.dig_spots import PlanFn
 from ramp.statemachine import Status
 
 log = logging.getLogger("ramp.autonomy.executive")
@@ -48,6 +49,7 @@ START_REGION = ArenaMap(length=arena.START_END_X_M)
 START_FINE = PlannerConfig(resolution_m=0.025, margin_m=0.06, min_margin_m=0.03)
 DOCK_REFERENCE = (arena.ROBOT_LENGTH_M / 2 + 1.0, arena.COLLECTOR_Y_M)  # the approach
 DIG_REFERENCE = (arena.OBSTACLE_END_X_M + 1.0, arena.COLLECTOR_Y_M)  # inside the dig region
+HEADING_SEARCHES = 3  # digging spots tried with the search over headings when the grid fails
 DOCK_GAP_M = 0.04  # the crossing home stops this short of the wall; Dock does the rest
 VANTAGE_TOLERANCE_M = 0.12  # already this near the vantage point (and facing +x): stay
 VANTAGE_YAW_DEG = 4.0
@@ -85,18 +87,20 @@ def at_vantage(kit: Kit, pose: Pose) -> bool:
             and yaw_error(pose.yaw, 0.0) <= math.radians(VANTAGE_YAW_DEG))
 
 
-def plan_vantage(kit: Kit, planners: StartPlanners, pose: Pose) -> PlanResult:
+def plan_vantage(kit: Kit, planners: StartPlanners, pose: Pose, *,
+                 headings: bool = True) -> PlanResult:
     """A plan inside the start region to a vantage point facing +x, or why there is none."""
     if at_vantage(kit, pose):
         return PlanResult((Path(np.array([[pose.x, pose.y]]), final_yaw=0.0),))
     last = PlanResult((), "no vantage point tried")
     for planner in (planners.coarse, planners.fine):
         if abs(pose.x - kit.settings.vantage_x_m) <= VANTAGE_TOLERANCE_M:
-            result = planner.plan(pose, pose.xy, goal_yaw=0.0)  # a turn on the spot
+            result = planner.plan(pose, pose.xy, goal_yaw=0.0,  # a turn on the spot
+                                  headings=headings)
             if result.ok:
                 return result
         for goal in vantage_goals(kit, pose):
-            result = planner.plan(pose, goal, goal_yaw=0.0)
+            result = planner.plan(pose, goal, goal_yaw=0.0, headings=headings)
             if result.ok:
                 return result
             last = result
@@ -122,8 +126,9 @@ def trim_dock(result: PlanResult, gap: float = DOCK_GAP_M) -> PlanResult:
                       result.min_clearance_m, result.margin_m)
 
 
-def plan_home(planner: Planner, pose: Pose) -> tuple[PlanResult, object]:
-    result, dock = plan_to_dock(planner, pose)
+def plan_home(planner: Planner, pose: Pose, *, headings: bool = True,
+              ) -> tuple[PlanResult, object]:
+    result, dock = plan_to_dock(planner, pose, headings=headings)
     return trim_dock(result), dock
 
 
@@ -134,36 +139,65 @@ def choose_spot(planner: Planner, sites: DigSites, pose: Pose,
     where the creep ends, since it arrives there and leaves from there; a spot by a wall is
     entered and left by manoeuvres the follower drives with only centimetres to spare. When
     none of those can be reached, `DigSites.next_spot`'s choice; when the grid sees no way
-    into the digging region at all, spots ranked from inside it, for the planner's search
-    over headings to reach through a gap barely wider than the robot."""
+    into the digging region at all, spots ranked from inside it.
+
+    All of that on the grid first; only when it reaches no spot, once more with the
+    planner's search over headings (a gap barely wider than the robot), for at most
+    `HEADING_SEARCHES` spots: a search that finds nothing costs seconds."""
+
+    def on_grid(start: Pose, goal: tuple[float, float], goal_yaw: float) -> PlanResult:
+        return planner.plan(start, goal, goal_yaw, headings=False)
+
+    spot, result = _choose(planner, sites, pose, on_grid, tries)
+    if spot is not None or result.reason.startswith("start"):
+        return spot, result
+    budget = [HEADING_SEARCHES]
+
+    def over_headings(start: Pose, goal: tuple[float, float], goal_yaw: float) -> PlanResult:
+        if budget[0] <= 0:
+            return PlanResult((), "no more searches over headings")
+        budget[0] -= 1
+        return planner.plan_over_headings(start, goal, goal_yaw)
+
+    spot, second = _choose(planner, sites, pose, over_headings, HEADING_SEARCHES)
+    if spot is not None:
+        return spot, second
+    return None, PlanResult((), f"{result.reason}; searching over headings too: "
+                                f"{second.reason}")
+
+
+def _choose(planner: Planner, sites: DigSites, pose: Pose, plan: PlanFn,
+            tries: int) -> tuple[DigSpot | None, PlanResult]:
     creep = sites.config.creep_m
+    budget = tries
     for spot in sites.candidates(DOCK_REFERENCE, reachable_from=pose.xy):
         x, y = spot.pose.x, spot.pose.y
         if not (planner.can_spin_at(x, y) and planner.can_spin_at(x + creep, y)):
             continue
-        result = planner.plan(pose, spot.pose.xy, goal_yaw=spot.pose.yaw)
+        result = plan(pose, spot.pose.xy, spot.pose.yaw)
         if result.ok:
             return spot, result
-        tries -= 1
-        if tries <= 0:
+        budget -= 1
+        if budget <= 0:
             break
-    fallback, result = sites.next_spot(pose, reference=DOCK_REFERENCE)
+    fallback, result = sites.next_spot(pose, reference=DOCK_REFERENCE, tries=tries, plan=plan)
     if fallback is not None:
         return fallback, result
     # The grid sees no way into the digging region: a gap barely wider than the robot,
     # which only the planner's search over headings gets through. Rank the spots from
     # inside the region instead, and let the planner try.
     last = result
+    budget = tries
     for spot in sites.candidates(DIG_REFERENCE):
         x, y = spot.pose.x, spot.pose.y
         if not (planner.can_spin_at(x, y) and planner.can_spin_at(x + creep, y)):
             continue
-        result = planner.plan(pose, spot.pose.xy, goal_yaw=spot.pose.yaw)
+        result = plan(pose, spot.pose.xy, spot.pose.yaw)
         if result.ok:
             return spot, result
         last = result
-        tries -= 1
-        if tries <= 0:
+        budget -= 1
+        if budget <= 0:
             break
     return None, last
 

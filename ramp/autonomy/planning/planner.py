@@ -120,8 +120,14 @@ class Planner:
         clear, _pose = level.legs_clearance(legs, start_yaw)
         return clear >= level.config.check_margin_m - LATTICE_TOLERANCE_M
 
-    def plan(self, start: Pose, goal: Point, goal_yaw: float | None = None) -> PlanResult:
-        """Legs from `start` to `goal` (then turned to `goal_yaw` if given), or why not."""
+    def plan(self, start: Pose, goal: Point, goal_yaw: float | None = None, *,
+             headings: bool = True) -> PlanResult:
+        """Legs from `start` to `goal` (then turned to `goal_yaw` if given), or why not.
+
+        The grid at the nominal margin, then at the smallest; then, unless `headings` is
+        False, the search over headings (`plan_over_headings`), which costs up to seconds
+        where it finds nothing: a caller with several goals to try tries them all on the
+        grid first."""
         first = self._levels[0].plan(start, goal, goal_yaw)
         if first.ok or len(self._levels) == 1:
             return first
@@ -129,14 +135,20 @@ class Planner:
         expanded = first.expanded + second.expanded
         if second.ok:
             return replace(second, expanded=expanded)
-        if second.reason.startswith(("goal:", "start")):
+        if second.reason.startswith(("goal:", "start")) or not headings:
             return replace(second, expanded=expanded)
         # Last resort: search over headings too, where the footprint fits at each.
-        third = self._levels[-1].plan_lattice(start, goal, goal_yaw)
+        third = self.plan_over_headings(start, goal, goal_yaw)
         if third.ok:
             return replace(third, expanded=expanded + third.expanded)
         return replace(second, reason=f"{second.reason}; searching over headings too: "
                                       f"{third.reason}", expanded=expanded + third.expanded)
+
+    def plan_over_headings(self, start: Pose, goal: Point,
+                           goal_yaw: float | None = None) -> PlanResult:
+        """The search over position and heading alone (`lattice.py`), at the smallest
+        margin: for a gap barely wider than the robot, where the grid's turns never fit."""
+        return self._levels[-1].plan_lattice(start, goal, goal_yaw)
 
 
 class _MarginPlanner:
