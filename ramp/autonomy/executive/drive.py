@@ -36,7 +36,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ramp.autonomy.executive.kit import Kit
-from ramp.autonomy.executive.localize import apply_level, describe, level_from_floor, lost
+from ramp.autonomy.executive.localize import apply_level, assume_level_floor, describe, lost
 from ramp.autonomy.executive.sensing import (
     DONE,
     FAILED,
@@ -174,7 +174,7 @@ class PlanDriver:
                 if loc.level is not None:
                     apply_level(self.step_, loc.level)
                 else:
-                    level_from_floor(self.step_)
+                    assume_level_floor(self.step_)
                 self._scans = LevelScans(self.kit)
                 self._scans.start(now)
                 return Status.running()

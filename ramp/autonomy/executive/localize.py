@@ -11,7 +11,7 @@
   gravity and so the gimbal's set-point); then the gimbal settles level again. When the scan
   cannot say (the localizer found it tilted but not by how much) and the AHRS claims a lean
   the arena's floor never gives a standing robot, the floor is taken as level
-  (`level_from_floor`): that is an IMU whose mount shifted.
+  (`assume_level_floor`): that is an IMU whose mount shifted.
 - **Rescan** takes fresh level scans (`ctx.localization_scan`).
 - **Relocalize** localizes them with the AHRS yaw and the dead-reckoned pose as priors (no
   pose prior after an operator had the robot: they may have moved it anywhere); lost ->
@@ -77,12 +77,13 @@ def apply_level(step: Step, hint: LevelHint) -> None:
     p.leveller.level(0.0)
 
 
-def level_from_floor(step: Step) -> bool:
+def assume_level_floor(step: Step) -> bool:
     """When the AHRS says the chassis, standing still, leans more than the arena's floor
     ever tilts it (`FLOOR_LEAN_DEG`), its gravity is what is wrong (an IMU whose mount
     shifted, SPEC 6.2): tell it the chassis stands level. The AHRS folds the difference into
     its mount correction, the gimbal levels on it, and what tilt is left (the floor's degree
-    or so) the localizer's own re-levelling finds. True when it did."""
+    or so) the localizer's own re-levelling finds. True when it did. (Mid-run, with only
+    level scans at hand: `pipeline.level_from_floor` needs a 3D sweep's view of the floor.)"""
     ahrs = step.kit.perception.ahrs
     lean = math.degrees(angle_between(up_in_chassis(ahrs.roll, ahrs.pitch), (0.0, 0.0, 1.0)))
     if lean <= FLOOR_LEAN_DEG or step.kit.perception.odometry.moving:
@@ -145,7 +146,7 @@ class Relevel(Step):
         self.settling_since = now
         if isinstance(hint, LevelHint):
             apply_level(self, hint)
-        elif not level_from_floor(self):
+        elif not assume_level_floor(self):
             self.scans = LevelScans(self.kit)
             self.scans.start(now)
 
