@@ -105,7 +105,8 @@ def _mission(args: argparse.Namespace) -> int:
     options = MissionOptions(seed=args.seed, start_box=box, heading=heading, fault=args.fault,
                              duration=args.duration, world=args.world, config=args.config,
                              realtime=args.realtime,
-                             port=REALTIME_PORT if args.port is None else args.port)
+                             port=(REALTIME_PORT if args.port is None else args.port)
+                             if args.realtime else 0)
     logging.basicConfig(level=logging.ERROR, format="%(levelname)s %(name)s: %(message)s")
     try:
         trace = open(args.trace, "w", encoding="utf-8") if args.trace else None  # noqa: SIM115
@@ -173,9 +174,12 @@ def _print_change(run: Any, change: Any) -> None:
 
 def _referee(path: str) -> dict[str, Any]:
     """The trace refereed on its own (`ramp.simulation.referee`), as a cross-check."""
-    from ramp.simulation.referee import referee
+    from ramp.simulation.referee import TraceError, referee
 
-    r = referee(Path(path))
+    try:
+        r = referee(Path(path))
+    except TraceError as exc:  # a run that failed before its first sample
+        return {"error": str(exc)}
     return {"collisions": r.collisions, "crater_entries": r.crater_entries,
             "delivered_at_collector_kg": round(r.delivered_at_collector_kg, 3),
             "delivered_elsewhere_kg": round(r.delivered_elsewhere_kg, 3),
@@ -202,9 +206,12 @@ def describe(s: dict[str, Any]) -> list[str]:
         out.insert(1, f"  error         {s['error']}")
     if "referee" in s:
         r = s["referee"]
-        out.append(f"  trace         {s['trace']}: refereed {r['collisions']} collision(s), "
-                   f"{r['crater_entries']} crater entr(y/ies), "
-                   f"{r['delivered_at_collector_kg']:.2f} kg at the collector")
+        if "error" in r:
+            out.append(f"  trace         {s['trace']}: not refereed: {r['error']}")
+        else:
+            out.append(f"  trace         {s['trace']}: refereed {r['collisions']} "
+                       f"collision(s), {r['crater_entries']} crater entr(y/ies), "
+                       f"{r['delivered_at_collector_kg']:.2f} kg at the collector")
     for key in ("plot", "record"):
         if s.get(key):
             out.append(f"  {key:13s} {s[key]}")

@@ -259,3 +259,25 @@ def test_a_passage_along_a_wall_is_reached_by_a_shallow_slant_the_footprint_can_
             under |= 1.8 < x < 2.1 and y < 0.6
         yaw = end_yaw(leg, yaw)
     assert under
+
+
+def test_a_replan_from_beside_a_cramped_goal_steps_onto_it_and_turns_instead_of_going_round(
+        ) -> None:
+    # Seeded layout 73's docking approach (1.6, 1.94), facing +x: a crater 0.78 m away leaves
+    # no room to spin there, so it is entered by the way in. A fix a centimetre or ten off it
+    # must not send the robot round that way again (it did, for the rest of the run).
+    crater = Disc(1.69, 2.72, 0.165)
+    rocks = (Disc(2.67, 2.02, 0.165), Disc(3.14, 2.01, 0.175))
+    arena = ArenaMap(obstacles=(crater, *rocks))
+    planner = Planner(arena)
+    goal = (1.6, 1.94)
+    assert not planner.can_spin_at(*goal)
+    for start in (Pose(1.587, 1.941, math.radians(11.8)), Pose(1.5, 1.9, math.radians(11.0))):
+        result = planner.plan(start, goal, 0.0)
+        assert result.ok, result.reason
+        assert len(result.legs) == 1 and result.length_m <= 0.15
+        assert end_yaw(result.legs[0], start.yaw) == 0.0
+        for x, y, a in swept_poses(result.legs[0], start.yaw):
+            assert sampled_clearance(arena, x, y, a) >= 0.025
+    far = planner.plan(Pose(1.2, 1.6, math.radians(45.0)), goal, 0.0)
+    assert far.ok and far.length_m > 0.4  # from further off: the way in, as before

@@ -53,6 +53,8 @@ ESCAPE_STEP_M = 0.05
 ESCAPE_RADIUS_M = 2.0  # how far from the start the search may go
 ESCAPE_MAX_EXPANSIONS = 6000
 MAX_REPAIRS = 4
+NEAR_GOAL_M = 0.15  # a start this near a goal without room to spin goes straight to it
+STEP_MIN_M = 0.02  # nearer than this: only the turn
 SHORTCUT_TRIES = 8  # exact sweep checks per vertex when shortcutting
 REPAIR_RADIUS_M = 0.5  # a failed turn makes A* pay to pass within this of it ...
 REPAIR_COST = 6.0  # ... up to this much extra per cell at the spot itself
@@ -194,6 +196,9 @@ class _MarginPlanner:
         tail: list[Path] = []
         target, target_yaw = goal, goal_yaw
         if goal_yaw is not None and not self.can_spin_at(*goal):
+            near = self._short_step(start, goal, goal_yaw)
+            if near is not None:
+                return near
             way_out = self._escape(Pose(goal[0], goal[1], goal_yaw))
             if way_out is None:
                 return PlanResult((), f"goal: no room to turn into the pose ({goal[0]:.2f}, "
@@ -211,6 +216,25 @@ class _MarginPlanner:
         legs = _merge(list(result.legs) + tail)
         clear, _pose = self.legs_clearance(legs, start.yaw)
         return PlanResult(tuple(legs), "", result.expanded, clear, self.config.margin_m)
+
+    def _short_step(self, start: Pose, goal: Point, goal_yaw: float) -> PlanResult | None:
+        """Almost there (a fix a few centimetres off a goal with no room to spin): straight
+        to the goal, forwards or backwards as it lies, then the turn to `goal_yaw`, when that
+        fits; else None. Without it, a re-plan from beside such a goal leaves it to come in
+        again by the way in, arrives beside it again, and never ends."""
+        dx, dy = goal[0] - start.x, goal[1] - start.y
+        dist = math.hypot(dx, dy)
+        if dist > NEAR_GOAL_M:
+            return None
+        if dist < STEP_MIN_M:
+            leg = Path(np.array([start.xy]), final_yaw=goal_yaw)
+        else:
+            ahead = abs(wrap_angle(math.atan2(dy, dx) - start.yaw)) <= math.pi / 2
+            leg = Path(np.array([start.xy, goal]), reverse=not ahead, final_yaw=goal_yaw)
+        clear, _pose = self.legs_clearance([leg], start.yaw)
+        if clear < min(self.config.check_margin_m, self._start_clearance(start)) - 1e-6:
+            return None
+        return PlanResult((leg,), "", 0, clear, self.config.margin_m)
 
     def _plan_head(self, start: Pose, goal: Point, goal_yaw: float | None) -> PlanResult:
         """Plan from the start, getting clear of where it stands first if it must."""
