@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: run teleop screenshots test lint bench bench-quick fuzz soak clean
+.PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -24,6 +24,17 @@ teleop: $(STAMP)
 	@$(VENV)/bin/ramp run --sim --config ramp.yaml --host 127.0.0.1 --port $(ROBOT_PORT) & \
 	robot=$$!; trap 'kill $$robot 2>/dev/null; wait $$robot 2>/dev/null' EXIT; \
 	$(VENV)/bin/ramp-teleop --backend 127.0.0.1:$(ROBOT_PORT) --http-port $(TELEOP_PORT)
+
+# A whole RMC mission on the wall clock, with the operator console to watch it and take over
+# (control.acquire in the console, or `ramp-shell 127.0.0.1:5577`); Ctrl-C stops both.
+mission: $(STAMP)
+	@$(VENV)/bin/ramp sim mission --realtime --port $(ROBOT_PORT) & \
+	robot=$$!; trap 'kill $$robot 2>/dev/null; wait $$robot 2>/dev/null' EXIT; \
+	sleep 2; $(VENV)/bin/ramp-teleop --backend 127.0.0.1:$(ROBOT_PORT) --http-port $(TELEOP_PORT)
+
+# The issue's campaign: 40 seeded missions over both start boxes and all four headings.
+campaign: $(STAMP)
+	$(VENV)/bin/ramp sim campaign --runs 40
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check ramp firmware_like tests bench

@@ -20,6 +20,7 @@ AUTONOMY_SECTIONS: tuple[str, ...] = (
         "obstacles",
         "localizer",
         "perception",
+        "mission",
     )
     if find_spec("ramp.autonomy") is not None else ())
 

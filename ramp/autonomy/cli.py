@@ -1,18 +1,35 @@
-"""`ramp-autonomy`: the autonomy's command line.
+"""`ramp-autonomy`: the autonomy on the robot, and the check of its config (SPEC 6.3).
 
-For now it validates `autonomy.yaml` (`ramp-autonomy check FILE`) without touching any
-hardware, the way `ramp check` validates `ramp.yaml`. Running the mission on the robot
-(`ramp-autonomy --backend HOST:PORT [--config autonomy.yaml]`, SPEC 6.3) comes with the
-mission itself.
+    ramp-autonomy --backend HOST:PORT [--config autonomy.yaml] [--start-box left|right]
+    ramp-autonomy check FILE
+
+The first runs the RMC mission on the robot: the drivers `autonomy.yaml` names (the Hokuyo
+at its address, the PhidgetSpatial IMU and the pan/tilt servo board), the wall clock, one
+scheduler at 100 Hz, and the same executive and mission machine `ramp sim mission` runs in
+the simulator (`ramp.autonomy.executive.Autonomy`), an MCP client of the backend at
+`--backend` (default: the config's `backend:`). It logs one line per state change (and what
+went wrong) to stderr, for journald. It ends when the mission is done (exit 0); a mission
+waiting for its operator keeps running, since an operator can take over, put things right
+and hand control back. SIGINT or SIGTERM stop the robot (`robot:robot.stop=()`) and end it
+(exit 0). Exit 2 on a usage or config error.
+
+`check` validates `autonomy.yaml` without touching any hardware, as `ramp check` validates
+`ramp.yaml` (exit 1 when it has errors, each as `file:line: key.path: what was expected`).
 """
 
 from __future__ import annotations
 
 import argparse
+import logging
+import signal
 import sys
 from collections.abc import Sequence
+from types import FrameType
 
-from ramp.autonomy.config import AutonomyConfig, check_config
+from ramp.autonomy.config import AutonomyConfig, check_config, parse_address
+
+DEFAULT_CONFIG = "autonomy.yaml"
+STOP_FLUSH_S = 0.3  # after a signal: time for the stop to reach the backend
 
 
 def summary(cfg: AutonomyConfig) -> list[str]:
@@ -29,27 +46,125 @@ def summary(cfg: AutonomyConfig) -> list[str]:
     ]
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="ramp-autonomy", description="The RAMP autonomy (an MCP client of the backend).")
+        prog="ramp-autonomy",
+        description="The RAMP autonomy: the RMC mission as an MCP client of the backend.",
+        usage="ramp-autonomy --backend HOST:PORT [--config autonomy.yaml] "
+              "[--start-box left|right]\n       ramp-autonomy check FILE")
+    parser.add_argument("--backend", metavar="HOST:PORT",
+                        help="the backend's MCP address (default: the config's backend)")
+    parser.add_argument("--config", default=DEFAULT_CONFIG, metavar="FILE",
+                        help=f"the autonomy's config (default {DEFAULT_CONFIG})")
+    parser.add_argument("--start-box", choices=("left", "right"), default=None,
+                        help="the start box, when the team is told (default: the first "
+                             "localization tries both)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     check = sub.add_parser("check", help="validate an autonomy.yaml without touching hardware")
     check.add_argument("file", metavar="FILE", help="the autonomy config, e.g. autonomy.yaml")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
     args = parser.parse_args(argv)
-    if args.command != "check":
+    if args.command == "check":
+        return cmd_check(args.file)
+    if args.backend is None:
         parser.print_usage(sys.stderr)
-        print("ramp-autonomy: error: only `ramp-autonomy check FILE` is available in this "
-              "version", file=sys.stderr)
+        print("ramp-autonomy: error: give --backend HOST:PORT to run the mission, or "
+              "`ramp-autonomy check FILE` to validate a config", file=sys.stderr)
         return 2
-    cfg, errors = check_config(args.file)
+    return cmd_run(args)
+
+
+def cmd_check(path: str) -> int:
+    cfg, errors = check_config(path)
     if errors or cfg is None:
         for err in errors:
             print(err, file=sys.stderr)
-        print(f"ramp-autonomy: {len(errors)} error(s) in {args.file}", file=sys.stderr)
+        print(f"ramp-autonomy: {len(errors)} error(s) in {path}", file=sys.stderr)
         return 1
-    print(f"{args.file}: ok")
+    print(f"{path}: ok")
     for line in summary(cfg):
         print(f"  {line}")
+    return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    cfg, errors = check_config(args.config)
+    if errors or cfg is None:
+        for err in errors:
+            print(err, file=sys.stderr)
+        print(f"ramp-autonomy: {len(errors)} error(s) in {args.config}", file=sys.stderr)
+        return 2
+    try:
+        backend = parse_address(args.backend) if args.backend else (cfg.backend_host,
+                                                                     cfg.backend_port)
+    except ValueError as exc:
+        print(f"ramp-autonomy: --backend: {exc}", file=sys.stderr)
+        return 2
+    for kind, name in (("imu", cfg.imu.driver), ("gimbal", cfg.gimbal.driver)):
+        if name == "sim":
+            print(f"ramp-autonomy: {args.config}: {kind}.driver: 'sim' runs only in the "
+                  "simulator (ramp sim mission); on the robot use phidget", file=sys.stderr)
+            return 2
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    return run_on_robot(cfg, backend, start_box=args.start_box)
+
+
+def run_on_robot(cfg: AutonomyConfig, backend: tuple[str, int], *,
+                 start_box: str | None = None) -> int:
+    """The mission on real hardware, on the wall clock, until done or a signal."""
+    from ramp.autonomy.executive.autonomy import Autonomy
+    from ramp.autonomy.hal import driver_class
+    from ramp.autonomy.hal.hokuyo import HokuyoLidar
+    from ramp.autonomy.perception.stack import Perception
+    from ramp.clock import MonotonicClock
+    from ramp.errors import DeviceError
+    from ramp.scheduler import Scheduler
+
+    log = logging.getLogger("ramp.autonomy")
+    clock = MonotonicClock()
+    scheduler = Scheduler(clock, 100.0)
+    now = clock.now()
+    lidar = HokuyoLidar(f"{cfg.lidar.host}:{cfg.lidar.port}", clock=clock, loop=scheduler)
+    imu = driver_class("imu", cfg.imu.driver)(cfg.imu)
+    pan_tilt = driver_class("gimbal", cfg.gimbal.driver)(cfg.gimbal)
+    perception = Perception(cfg, lidar, imu, pan_tilt, now=now)
+    perception.add_tasks(scheduler)
+    for device in (imu, pan_tilt):
+        try:
+            device.open(now)
+        except DeviceError as exc:  # the vendor library is missing: say so, and go on
+            device.fault = exc     # without it; the mission waits for its sensors (naming
+            log.error("%s", exc)   # this one) and then for an operator
+    lidar.start()  # scans on demand: the mission asks for them (Perception.start's steps)
+    autonomy = Autonomy(scheduler, perception, cfg, backend, start_box=start_box)
+    stopping: list[str] = []
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        stopping.append(signal.Signals(signum).name)
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, on_signal)
+    log.info("ramp-autonomy: mission of %g s against the backend at %s:%d",
+             autonomy.mission.config.duration_s, *backend)
+    autonomy.start(clock.now())
+    try:
+        scheduler.run(lambda: bool(stopping) or autonomy.mission.over)
+        if stopping:
+            log.warning("ramp-autonomy: %s: stopping the robot", stopping[0])
+            if autonomy.mission.has_control:
+                autonomy.robot.stop_all()
+            end = clock.now() + STOP_FLUSH_S
+            scheduler.run(lambda: clock.now() >= end)
+    finally:
+        autonomy.close()
+        perception.close()
+    log.info("ramp-autonomy: mission %s (%s)", autonomy.mission.outcome,
+             autonomy.mission.state)
     return 0
 
 

@@ -102,6 +102,22 @@ MISSION_FIELDS: dict[str, Field] = {
     "dock_deposit_estimate_s": Field(float, 60.0, lo=0.0, hi=3600.0, what="a time in s"),
     "min_dig_s": Field(float, 30.0, lo=0.0, hi=3600.0, what="a time in s"),
     "stop_settle_s": Field(float, 1.0, lo=0.0, hi=60.0, what="a time in s"),
+    # the executive's (ramp/autonomy/executive/settings.py ExecutiveSettings; a test keeps
+    # both equal)
+    "still_s": Field(float, 0.3, lo=0.0, hi=10.0, what="a time in s"),
+    "vantage_x_m": Field(float, 0.80, lo=0.6, hi=0.9, what="an x in the start region in m"),
+    "drive_speed_pct": Field(float, 60.0, lo=5.0, hi=100.0, what="a speed in %"),
+    "relocalize_every_m": Field(float, 1.2, lo=0.1, hi=20.0, what="a distance in m"),
+    "pose_decay_m": Field(float, 5.0, lo=0.1, hi=1000.0, what="a distance in m"),
+    "obstacle_margin_m": Field(float, 0.03, lo=0.0, hi=1.0, what="a distance in m"),
+    "partial_margin_m": Field(float, 0.10, lo=0.0, hi=1.0, what="a distance in m"),
+    "max_replans": Field(int, 4, lo=0, hi=100, what="a number of re-plans"),
+    "dig_target_kg": Field(float, 16.0, lo=0.1, hi=1000.0, what="a load in kg"),
+    "dig_max_s": Field(float, 90.0, lo=1.0, hi=3600.0, what="a time in s"),
+    "chain_speed_pct": Field(float, 100.0, lo=1.0, hi=100.0, what="a speed in %"),
+    "creep_speed_pct": Field(float, 3.0, lo=0.0, hi=30.0, what="a speed in %"),
+    "dock_speed_pct": Field(float, 12.0, lo=1.0, hi=50.0, what="a speed in %"),
+    "dump_done_kg": Field(float, 0.5, lo=0.0, hi=100.0, what="a load in kg"),
 }
 
 TOP_KEYS = ("backend", "lidar", "imu", "gimbal", "mission")

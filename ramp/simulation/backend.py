@@ -15,7 +15,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from firmware_like.marte import MarteWorld
-from ramp.clock import VirtualClock
+from ramp.clock import Clock, VirtualClock
 from ramp.config import Config, check_config
 from ramp.errors import ConfigErrors
 from ramp.runtime import build
@@ -39,15 +39,16 @@ class SimBackend:
     #: The backplane steps the world in its first task: the rig must not step it again.
     steps_world = True
 
-    def __init__(self, world: MarteWorld, clock: VirtualClock | None = None,
+    def __init__(self, world: MarteWorld, clock: Clock | None = None,
                  config: Config | str | Path = DEFAULT_RAMP_YAML, *,
-                 wire_level: bool = True) -> None:
+                 wire_level: bool = True, port: int = 0) -> None:
         self.world = world
-        self.clock = clock if clock is not None else VirtualClock()
+        # A virtual clock by default; `ramp sim mission --realtime` gives the wall clock.
+        self.clock: Clock = clock if clock is not None else VirtualClock()
         self.config = config if isinstance(config, Config) else load_backend_config(config)
         self.backplane = SimBackplane(self.config, world, wire_level=wire_level)
         self.supervisor = build(self.config, self.clock, self.backplane.bus_factory,
-                                host="127.0.0.1", port=0)
+                                host="127.0.0.1", port=port)
         self.backplane.attach(self.supervisor)
         self.supervisor.start()
         self.supervisor.settle()

@@ -347,6 +347,8 @@ def _print_table(doc: dict[str, Any], rows: Iterable[dict[str, Any]]) -> None:
                       _fmt(r.get("sim_time_s")), _fmt(r.get("wall_time_s"), 2),
                       "yes" if succeeded(r) else "no")
     out = Console(highlight=False)
+    if not out.is_terminal:  # a file or a pipe gets every column whole, not 80 wide
+        out = Console(highlight=False, width=160)
     out.print(table)
     out.print(f"success rate: {doc['succeeded']}/{doc['runs']} = "
               f"{100.0 * doc['success_rate']:.1f} % (>= {QUALIFY_KG:g} kg delivered, "

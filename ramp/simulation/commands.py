@@ -10,6 +10,10 @@ Nothing heavy is imported until a subcommand runs (numpy, the emulators, matplot
     ramp sim perceive [--world FILE | --seed N] --at X,Y,YAW [--hint left|right]
                       [--fault none|gyro-drift|imu-shift] [--config FILE] [--json]
                       [--plot FILE.png]
+    ramp sim mission [--seed N] [--start-box left|right] [--heading 0|90|180|270]
+                     [--world FILE] [--fault ...] [--duration 600] [--json] [--trace FILE]
+                     [--plot FILE.png] [--record FILE.mcap] [--realtime [--port P]]
+                     (ramp/simulation/mission_cli.py)
 
 `ramp sim perceive` needs the autonomy package (`ramp/autonomy/`); it is imported only when
 that subcommand runs, so the others work without it.
@@ -66,6 +70,12 @@ def add_campaign_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]
     add_parser(sub)
 
 
+def add_mission_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from ramp.simulation.mission_cli import add_mission_parser as add
+
+    add(sub)
+
+
 def add_perceive_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "perceive", help="localize and detect obstacles from one pose, on the emulated sensors",
@@ -106,6 +116,7 @@ SIM_COMMANDS: dict[str, Callable[[argparse._SubParsersAction[argparse.ArgumentPa
     "lidar": add_lidar_parser,
     "campaign": add_campaign_parser,
     "perceive": add_perceive_parser,
+    "mission": add_mission_parser,
 }
 
 

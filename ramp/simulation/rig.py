@@ -58,7 +58,7 @@ from ramp.autonomy.perception.ahrs import Ahrs
 from ramp.autonomy.perception.gimbal import GimbalLeveller
 from ramp.autonomy.perception.scans import ScanCollector
 from ramp.autonomy.perception.stack import Perception
-from ramp.clock import VirtualClock
+from ramp.clock import Clock, VirtualClock
 from ramp.scheduler import ScheduledTask, Scheduler
 from ramp.simulation.backend import SimBackend
 
@@ -113,7 +113,7 @@ class Rig:
         self.run_length_s = run_length_s
         self.backend = backend
         if backend is not None:
-            self.clock: VirtualClock = backend.clock
+            self.clock: Clock = backend.clock
             self.scheduler: Scheduler = backend.scheduler
         else:
             self.clock = VirtualClock()

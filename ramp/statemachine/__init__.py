@@ -23,8 +23,9 @@ The flow (`table.py`; drawn by `python -m ramp.statemachine --mermaid`):
   `max_relocalize_tries` passes) -> `resume` -> where the interrupted task goes on
   (`table.RESUME_AT`: a drive is planned again), or `waiting_for_operator`. A `fault` or
   `failed` -> `stop` -> `resume` the step (up to `max_step_retries` times), then
-  `waiting_for_operator`. A driving state (`cross_to_dig`, `excavate`, `cross_home`, `dock`,
-  `decouple`) is never entered, nor stayed in, without a confident pose.
+  `waiting_for_operator`. A driving state (`prepare_for_scan`, `cross_to_dig`, `excavate`,
+  `cross_home`, `dock`, `decouple`) is never entered, nor stayed in, without a confident
+  pose.
 - **Operator.** An operator's takeover (`Status.operator`, or `observe_control` with another
   owner) -> `paused`: nothing more is commanded, not even a stop. When control is free
   again -> `acquire_control` -> `relevel` -> `rescan` -> `relocalize` -> `resume`.

@@ -46,8 +46,9 @@ STATES: tuple[StateSpec, ...] = (
     # -- the run: thesis figure 5.35 ------------------------------------------------------
     StateSpec("initial_localization", "finds the pose from a level scan of the walls; the "
               "start box and heading break the arena's symmetry", "run", timeout_s=60.0),
-    StateSpec("prepare_for_scan", "levels the gimbal and holds still for the 3D scan", "run",
-              timeout_s=30.0),
+    StateSpec("prepare_for_scan", "drives, inside the start region, to where the 3D scan "
+              "sees the obstacle region (facing +x) and localizes there", "run", drives=True,
+              timeout_s=60.0),
     StateSpec("scan_for_obstacles", "tilts the LIDAR through its angles, one 2D scan at "
               "each, merged into a 3D scan", "run", timeout_s=60.0),
     StateSpec("detect_obstacles", "finds rocks and craters in the 3D scan and builds the "

@@ -168,3 +168,21 @@ def test_planned_trip_and_docking_driven_by_the_model_keep_the_footprint_clear(
         if x - 0.6 * math.cos(yaw) < 0.1:  # docking: the x = 0 wall is the target
             continue
         assert gap > min(0.0, start_gap - 0.005)
+
+
+def test_a_shallow_corner_is_turned_in_place_as_the_planner_checked_it() -> None:
+    # 18 deg at (1.0, 0): pure pursuit through it would lag the new heading for decimetres,
+    # swinging the outer front corner wide of the sweep the planner checked.
+    corner = (1.0, 0.0)
+    path = Path(np.array([[0.0, 0.0], corner, [2.0, math.tan(math.radians(18.0))]]))
+    robot = SkidSteer(Pose(0.0, 0.0, 0.0))
+    cmds = follow(path, robot)
+    turning = [k for k, c in enumerate(cmds) if c.status == "turning" and k > 5]
+    assert turning, "no turn in place at the corner"
+    k = turning[0]
+    x, y, yaw = robot.trail[k - 1]
+    assert math.hypot(x - corner[0], y - corner[1]) <= 0.015  # stopped at the corner
+    assert abs(math.degrees(yaw)) < 1.0  # still facing along the first stretch
+    for x, _y, yaw in robot.trail[k:]:
+        if x > corner[0] + 0.05:  # past the corner: already along the second stretch
+            assert abs(math.degrees(yaw) - 18.0) < 2.5

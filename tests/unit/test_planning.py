@@ -235,3 +235,49 @@ def test_a_gap_barely_wider_than_the_robot_is_found_by_searching_over_headings()
             through_gap |= 2.6 < x < 3.2 and 2.6 < y < 3.3
         yaw = end_yaw(leg, yaw)
     assert through_gap
+
+
+def test_a_passage_along_a_wall_is_reached_by_a_shallow_slant_the_footprint_can_turn_out_of(
+        ) -> None:
+    # Seeded layout 23: the only way into the digging region is under the crater at
+    # (1.95, 1.10), along the y = 0 wall, 0.95 m wide. From the start region the robot must
+    # come down at a slant shallow enough (11 or 14 deg) that it can turn square to the wall
+    # inside the passage; steeper, the turn sweeps a corner into the wall.
+    crater_low = Disc(1.95, 1.10, 0.145)
+    others = (Disc(1.88, 2.06, 0.125), Disc(1.71, 2.51, 0.055), Disc(1.94, 2.44, 0.10),
+              Disc(2.24, 3.06, 0.115))
+    arena = ArenaMap(obstacles=(crater_low, *others))
+    planner = Planner(arena)
+    start, goal = Pose(0.73, 1.41, math.radians(-0.5)), (3.9, 0.8)
+    result = planner.plan(start, goal, 0.0)
+    assert result.ok, result.reason
+    yaw = start.yaw
+    under = False
+    for leg in result.legs:
+        for x, y, a in swept_poses(leg, yaw)[::2]:
+            assert sampled_clearance(arena, x, y, a) >= 0.015
+            under |= 1.8 < x < 2.1 and y < 0.6
+        yaw = end_yaw(leg, yaw)
+    assert under
+
+
+def test_a_replan_from_beside_a_cramped_goal_steps_onto_it_and_turns_instead_of_going_round(
+        ) -> None:
+    # Seeded layout 73's docking approach (1.6, 1.94), facing +x: a crater 0.78 m away leaves
+    # no room to spin there, so it is entered by the way in. A fix a centimetre or ten off it
+    # must not send the robot round that way again (it did, for the rest of the run).
+    crater = Disc(1.69, 2.72, 0.165)
+    rocks = (Disc(2.67, 2.02, 0.165), Disc(3.14, 2.01, 0.175))
+    arena = ArenaMap(obstacles=(crater, *rocks))
+    planner = Planner(arena)
+    goal = (1.6, 1.94)
+    assert not planner.can_spin_at(*goal)
+    for start in (Pose(1.587, 1.941, math.radians(11.8)), Pose(1.5, 1.9, math.radians(11.0))):
+        result = planner.plan(start, goal, 0.0)
+        assert result.ok, result.reason
+        assert len(result.legs) == 1 and result.length_m <= 0.15
+        assert end_yaw(result.legs[0], start.yaw) == 0.0
+        for x, y, a in swept_poses(result.legs[0], start.yaw):
+            assert sampled_clearance(arena, x, y, a) >= 0.025
+    far = planner.plan(Pose(1.2, 1.6, math.radians(45.0)), goal, 0.0)
+    assert far.ok and far.length_m > 0.4  # from further off: the way in, as before

@@ -20,6 +20,7 @@ the reference gives every candidate's trip.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,6 +31,7 @@ from ramp.autonomy.planning.geometry import Pose
 from ramp.autonomy.planning.planner import Planner, PlanResult
 
 SKIP_NEAR_FAILED_M = 0.5
+PlanFn = Callable[[Pose, tuple[float, float], float], PlanResult]  # start, goal, goal yaw
 
 
 @dataclass(frozen=True)
@@ -155,12 +157,15 @@ class DigSites:
         return spots
 
     def next_spot(self, start: Pose, reference: tuple[float, float] | None = None,
-                  tries: int = 6) -> tuple[DigSpot | None, PlanResult]:
+                  tries: int = 6, plan: PlanFn | None = None,
+                  ) -> tuple[DigSpot | None, PlanResult]:
         """The cheapest acceptable spot the planner can reach from `start`, and the plan.
 
         `reference` (default: `start`) ranks the trips. Spots the planner cannot reach are
-        skipped, up to `tries` of them; then the last failure is returned with None.
+        skipped, up to `tries` of them; then the last failure is returned with None. `plan`
+        (start, goal, goal_yaw) -> PlanResult replaces `Planner.plan`.
         """
+        plan = plan or self.planner.plan
         ref = reference if reference is not None else start.xy
         last = PlanResult((), "no acceptable digging spot is left (every one overlaps a "
                               "trench, an obstacle or a wall, or cannot be reached)")
@@ -172,7 +177,7 @@ class DigSites:
                    for fx, fy in failed):
                 continue  # a spot beside one the planner could not reach fails alike
             tries -= 1
-            result = self.planner.plan(start, spot.pose.xy, goal_yaw=spot.pose.yaw)
+            result = plan(start, spot.pose.xy, spot.pose.yaw)
             if result.ok:
                 return spot, result
             failed.append(spot.pose.xy)

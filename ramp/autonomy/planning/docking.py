@@ -26,6 +26,7 @@ from ramp.autonomy.planning.planner import Planner, PlanResult
 
 # Straight reverse lengths tried, longest first (m of travel from the approach to the wall).
 REVERSE_LENGTHS_M = (1.0, 0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3, 0.2, 0.1)
+HEADING_SEARCHES = 3  # approaches tried with the search over headings when the grid fails
 
 
 @dataclass(frozen=True)
@@ -59,22 +60,38 @@ def docking_approaches(planner: Planner, *, collector_y: float = COLLECTOR_Y_M,
     return out
 
 
-def plan_to_dock(planner: Planner, start: Pose, *,
-                 collector_y: float = COLLECTOR_Y_M) -> tuple[PlanResult, DockApproach | None]:
+def plan_to_dock(planner: Planner, start: Pose, *, collector_y: float = COLLECTOR_Y_M,
+                 headings: bool = True) -> tuple[PlanResult, DockApproach | None]:
     """Plan from `start` to the first reachable approach; append the reverse leg.
 
     Returns the plan (its last leg is the straight reverse) and the approach used, or a
-    failed plan with the reason and None.
+    failed plan with the reason and None. `headings` False: the grid alone, never the
+    planner's search over headings.
     """
     approaches = docking_approaches(planner, collector_y=collector_y)
     if not approaches:
         return PlanResult((), f"no straight approach to the collector at y = {collector_y:.2f}"
                               " keeps the footprint clear of obstacles"), None
-    last = PlanResult((), "no docking approach tried")
+    # Every approach on the grid first; the search over headings (seconds where it finds
+    # nothing) only when the grid reaches none, and then for the first few it may help.
+    grid_reasons: list[str] = []
     for dock in approaches:
-        result = planner.plan(start, dock.approach.xy, goal_yaw=dock.approach.yaw)
+        result = planner.plan(start, dock.approach.xy, goal_yaw=dock.approach.yaw,
+                              headings=False)
         if result.ok:
-            return PlanResult(result.legs + (dock.reverse,), "", result.expanded,
-                              result.min_clearance_m, result.margin_m), dock
-        last = result
-    return PlanResult((), f"cannot reach any docking approach: {last.reason}"), None
+            return _with_reverse(result, dock), dock
+        grid_reasons.append(result.reason)
+    why = grid_reasons[-1]
+    hopeful = [dock for dock, reason in zip(approaches, grid_reasons, strict=True)
+               if not reason.startswith(("goal:", "start"))]
+    for dock in hopeful[:HEADING_SEARCHES if headings else 0]:
+        result = planner.plan_over_headings(start, dock.approach.xy, goal_yaw=dock.approach.yaw)
+        if result.ok:
+            return _with_reverse(result, dock), dock
+        why = f"{grid_reasons[-1]}; searching over headings too: {result.reason}"
+    return PlanResult((), f"cannot reach any docking approach: {why}"), None
+
+
+def _with_reverse(result: PlanResult, dock: DockApproach) -> PlanResult:
+    return PlanResult(result.legs + (dock.reverse,), "", result.expanded,
+                      result.min_clearance_m, result.margin_m)

@@ -42,8 +42,11 @@ class FollowerConfig:
     turn_gain: float = 2.0  # spin rate (rad/s) per rad of heading error, before limits
     lookahead_m: float = 0.30
     slow_down_m: float = 0.40  # ramp the speed down over this distance before a stop
-    goal_tolerance_m: float = 0.03
-    turn_start_rad: float = math.radians(20.0)  # heading error that stops the robot to turn
+    # A stretch ends this short of its corner at most: the planner checked the turn there
+    # keeping 1.5 cm (the start region's fine grid) to 2.5 cm, so stopping 3 cm short of a
+    # corner by a wall put a spin's corner into it.
+    goal_tolerance_m: float = 0.01
+    turn_start_rad: float = math.radians(20.0)  # heading error mid-stretch that stops it to turn
     turn_done_rad: float = math.radians(2.0)  # ... and the error at which turning ends
     off_path_m: float = 0.20  # cross-track error that gives up (the caller re-plans)
 
@@ -143,14 +146,17 @@ class PathFollower:
         return max(0.0, seg_len - along) + rest
 
     def _stops_after(self, k: int) -> bool:
-        """True when the robot must stop at the end of stretch k (the end, or a corner sharp
-        enough to turn in place)."""
+        """True when the robot must stop at the end of stretch k: the end, or any corner it
+        must turn at. The planner checked a turn in place there; pure pursuit through a
+        shallow corner lags the new heading for a few decimetres, and the footprint's
+        outer front corner swings up to several centimetres wide of the checked sweep (an
+        18 deg corner took one into a crater)."""
         if k + 2 >= len(self._corners):
             return True
         d1 = self._corners[k + 1] - self._corners[k]
         d2 = self._corners[k + 2] - self._corners[k + 1]
         turn = wrap_angle(math.atan2(d2[1], d2[0]) - math.atan2(d1[1], d1[0]))
-        return abs(turn) > self.config.turn_start_rad
+        return abs(turn) > self.config.turn_done_rad
 
     def _arrive(self, pose: Pose, cross: float, remaining: float) -> DriveCommand:
         """End of a stretch: on to the next, or the final turn, or done."""

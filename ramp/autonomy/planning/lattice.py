@@ -3,10 +3,12 @@
 The grid planner moves a disc of the robot's half-width and checks the rectangle afterwards;
 in a layout whose only way through is a gap barely wider than the robot, at an angle, every
 path it finds needs a turn where the rectangle does not fit. Here the state is a cell and one
-of 32 headings, so the search itself knows where the rectangle fits at which heading:
+of 48 headings, so the search itself knows where the rectangle fits at which heading:
 
-- headings are the directions of the 32 moves (1,0), (3,1), (2,1), (3,2), (1,1), ... (no two
-  more than 8 degrees apart), so a straight move goes exactly along its heading;
+- headings are the directions of the 48 moves (1,0), (5,1), (4,1), (3,1), (2,1), (3,2),
+  (1,1), ... (no two more than 12 degrees apart), so a straight move goes exactly along its
+  heading. The shallow ones (11 and 14 deg off an axis) are how a robot reaches a passage
+  along a wall it cannot turn in: down at a slant it can still turn square out of there;
 - primitives: a straight move forwards or backwards (reversing lets it back out of a pocket
   and line up, as a driver would), and a turn in place to the next heading either way;
 - validity, precomputed with numpy for every cell: the footprint at each heading, and swept
@@ -37,8 +39,8 @@ from ramp.autonomy.planning.geometry import (
 )
 from ramp.autonomy.planning.grid import OccupancyGrid, PlannerConfig
 
-# The first octant's moves (0, 18.4, 26.6, 33.7, 45 deg), mirrored into all eight.
-_OCTANT = ((1, 0), (3, 1), (2, 1), (3, 2), (1, 1))
+# The first octant's moves (0, 11.3, 14.0, 18.4, 26.6, 33.7, 45 deg), mirrored into all eight.
+_OCTANT = ((1, 0), (5, 1), (4, 1), (3, 1), (2, 1), (3, 2), (1, 1))
 MOVES = tuple(sorted({m for a, b in _OCTANT for m in (
     (a, b), (b, a), (-b, a), (-a, b), (-a, -b), (-b, -a), (b, -a), (a, -b))},
     key=lambda m: math.atan2(m[1], m[0]) % (2 * math.pi)))

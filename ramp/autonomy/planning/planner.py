@@ -53,6 +53,8 @@ ESCAPE_STEP_M = 0.05
 ESCAPE_RADIUS_M = 2.0  # how far from the start the search may go
 ESCAPE_MAX_EXPANSIONS = 6000
 MAX_REPAIRS = 4
+NEAR_GOAL_M = 0.15  # a start this near a goal without room to spin goes straight to it
+STEP_MIN_M = 0.02  # nearer than this: only the turn
 SHORTCUT_TRIES = 8  # exact sweep checks per vertex when shortcutting
 REPAIR_RADIUS_M = 0.5  # a failed turn makes A* pay to pass within this of it ...
 REPAIR_COST = 6.0  # ... up to this much extra per cell at the spot itself
@@ -112,8 +114,22 @@ class Planner:
     def can_spin_at(self, x: float, y: float) -> bool:
         return self._levels[0].can_spin_at(x, y)
 
-    def plan(self, start: Pose, goal: Point, goal_yaw: float | None = None) -> PlanResult:
-        """Legs from `start` to `goal` (then turned to `goal_yaw` if given), or why not."""
+    def accepts(self, legs: Sequence[Path], start_yaw: float) -> bool:
+        """True when driving `legs` from a pose of `start_yaw` keeps the footprint as far
+        from everything as the planner's loosest plan may (the check a plan it makes
+        passes): a plan made from a pose a few centimetres away, driven on from here."""
+        level = self._levels[-1]
+        clear, _pose = level.legs_clearance(legs, start_yaw)
+        return clear >= level.config.check_margin_m - LATTICE_TOLERANCE_M
+
+    def plan(self, start: Pose, goal: Point, goal_yaw: float | None = None, *,
+             headings: bool = True) -> PlanResult:
+        """Legs from `start` to `goal` (then turned to `goal_yaw` if given), or why not.
+
+        The grid at the nominal margin, then at the smallest; then, unless `headings` is
+        False, the search over headings (`plan_over_headings`), which costs up to seconds
+        where it finds nothing: a caller with several goals to try tries them all on the
+        grid first."""
         first = self._levels[0].plan(start, goal, goal_yaw)
         if first.ok or len(self._levels) == 1:
             return first
@@ -121,14 +137,20 @@ class Planner:
         expanded = first.expanded + second.expanded
         if second.ok:
             return replace(second, expanded=expanded)
-        if second.reason.startswith(("goal:", "start")):
+        if second.reason.startswith(("goal:", "start")) or not headings:
             return replace(second, expanded=expanded)
         # Last resort: search over headings too, where the footprint fits at each.
-        third = self._levels[-1].plan_lattice(start, goal, goal_yaw)
+        third = self.plan_over_headings(start, goal, goal_yaw)
         if third.ok:
             return replace(third, expanded=expanded + third.expanded)
         return replace(second, reason=f"{second.reason}; searching over headings too: "
                                       f"{third.reason}", expanded=expanded + third.expanded)
+
+    def plan_over_headings(self, start: Pose, goal: Point,
+                           goal_yaw: float | None = None) -> PlanResult:
+        """The search over position and heading alone (`lattice.py`), at the smallest
+        margin: for a gap barely wider than the robot, where the grid's turns never fit."""
+        return self._levels[-1].plan_lattice(start, goal, goal_yaw)
 
 
 class _MarginPlanner:
@@ -174,6 +196,9 @@ class _MarginPlanner:
         tail: list[Path] = []
         target, target_yaw = goal, goal_yaw
         if goal_yaw is not None and not self.can_spin_at(*goal):
+            near = self._short_step(start, goal, goal_yaw)
+            if near is not None:
+                return near
             way_out = self._escape(Pose(goal[0], goal[1], goal_yaw))
             if way_out is None:
                 return PlanResult((), f"goal: no room to turn into the pose ({goal[0]:.2f}, "
@@ -191,6 +216,25 @@ class _MarginPlanner:
         legs = _merge(list(result.legs) + tail)
         clear, _pose = self.legs_clearance(legs, start.yaw)
         return PlanResult(tuple(legs), "", result.expanded, clear, self.config.margin_m)
+
+    def _short_step(self, start: Pose, goal: Point, goal_yaw: float) -> PlanResult | None:
+        """Almost there (a fix a few centimetres off a goal with no room to spin): straight
+        to the goal, forwards or backwards as it lies, then the turn to `goal_yaw`, when that
+        fits; else None. Without it, a re-plan from beside such a goal leaves it to come in
+        again by the way in, arrives beside it again, and never ends."""
+        dx, dy = goal[0] - start.x, goal[1] - start.y
+        dist = math.hypot(dx, dy)
+        if dist > NEAR_GOAL_M:
+            return None
+        if dist < STEP_MIN_M:
+            leg = Path(np.array([start.xy]), final_yaw=goal_yaw)
+        else:
+            ahead = abs(wrap_angle(math.atan2(dy, dx) - start.yaw)) <= math.pi / 2
+            leg = Path(np.array([start.xy, goal]), reverse=not ahead, final_yaw=goal_yaw)
+        clear, _pose = self.legs_clearance([leg], start.yaw)
+        if clear < min(self.config.check_margin_m, self._start_clearance(start)) - 1e-6:
+            return None
+        return PlanResult((leg,), "", 0, clear, self.config.margin_m)
 
     def _plan_head(self, start: Pose, goal: Point, goal_yaw: float | None) -> PlanResult:
         """Plan from the start, getting clear of where it stands first if it must."""

@@ -1,0 +1,105 @@
+"""Prepare for Scan and Cross Obstacle Area (out to dig, back home): plans driven with
+`PlanDriver`, re-planned from every fix on the way.
+
+- **Prepare for Scan** drives, inside the start region, to where the 3D scan sees the whole
+  obstacle region (`plan.plan_vantage`: x = `vantage_x_m` facing +x, on the collector's line
+  when it can), then localizes standing there: the sweep's cloud is placed with that pose, and
+  a pose 5 cm and 2 deg off would move obstacles 3 m out by 12 cm.
+- **Cross to dig** drives `ctx.plan` to `ctx.dig_spot`.
+- **Cross home** drives `ctx.plan` (from `PlanPathHome`) to the collector: the approach in
+  front of it, a fix there, then straight back, stopping a few centimetres short of the
+  wall; Dock finishes on the buttons.
+"""
+
+from __future__ import annotations
+
+from ramp.autonomy.executive.drive import PlanDriver
+from ramp.autonomy.executive.plan import StartPlanners, plan_home, plan_vantage
+from ramp.autonomy.executive.step import Step
+from ramp.autonomy.planning import PlanResult, Pose
+from ramp.statemachine import Status
+
+
+class PrepareForScan(Step):
+    planners: StartPlanners | None = None  # shared by every instance: built once
+
+    def begin(self, now: float) -> None:
+        if PrepareForScan.planners is None:
+            PrepareForScan.planners = StartPlanners()
+        self.driver: PlanDriver | None = None
+
+    def step(self, now: float, dt: float) -> Status:
+        if self.driver is None:
+            pose = self.kit.pose()
+            if pose is None:
+                return Status.lost("no pose")
+            result = self._plan(pose)
+            if not result.ok:
+                return Status.failed(result.reason)
+            self.kit.log["planned"].append(("vantage", result))
+            self.driver = PlanDriver(self, result.legs, replan=self._plan, final_fix=True)
+        return self.driver.tick(now)
+
+    def end(self) -> None:
+        if self.driver is not None:
+            self.driver.cancel()
+
+    def _plan(self, pose: Pose, headings: bool = True) -> PlanResult:
+        assert PrepareForScan.planners is not None
+        return plan_vantage(self.kit, PrepareForScan.planners, pose, headings=headings)
+
+
+class CrossToDig(Step):
+    def begin(self, now: float) -> None:
+        self.driver: PlanDriver | None = None
+
+    def step(self, now: float, dt: float) -> Status:
+        ctx = self.ctx
+        if self.driver is None:
+            if ctx.plan is None or not ctx.plan.ok or ctx.dig_spot is None:
+                return Status.failed("no plan to a digging spot")
+            assert ctx.planner is not None
+            self.driver = PlanDriver(self, ctx.plan.legs, replan=self._plan,
+                                     check=ctx.planner.accepts)
+        return self.driver.tick(now)
+
+    def end(self) -> None:
+        if self.driver is not None:
+            self.driver.cancel()
+
+    def _plan(self, pose: Pose, headings: bool = True) -> PlanResult:
+        ctx = self.ctx
+        assert ctx.planner is not None and ctx.dig_spot is not None
+        spot = ctx.dig_spot.pose
+        result = ctx.planner.plan(pose, spot.xy, goal_yaw=spot.yaw, headings=headings)
+        if result.ok:
+            ctx.plan = result
+        return result
+
+
+class CrossHome(Step):
+    def begin(self, now: float) -> None:
+        self.driver: PlanDriver | None = None
+
+    def step(self, now: float, dt: float) -> Status:
+        ctx = self.ctx
+        if self.driver is None:
+            if ctx.plan is None or not ctx.plan.ok:
+                return Status.failed("no plan home")
+            assert ctx.planner is not None
+            self.driver = PlanDriver(self, ctx.plan.legs, replan=self._plan,
+                                     fix_before_reverse=True, check=ctx.planner.accepts)
+        return self.driver.tick(now)
+
+    def end(self) -> None:
+        if self.driver is not None:
+            self.driver.cancel()
+
+    def _plan(self, pose: Pose, headings: bool = True) -> PlanResult:
+        ctx = self.ctx
+        assert ctx.planner is not None
+        result, dock = plan_home(ctx.planner, pose, headings=headings)
+        if result.ok:
+            ctx.plan = result
+            ctx.dock = dock  # type: ignore[assignment]
+        return result

@@ -1,0 +1,97 @@
+"""Excavate: lower the ladder, run the chain, creep forward, stop at a target load or time.
+
+At the digging spot (facing the far wall): `ble:lift.pos=(0.0)` lowers the ladder into the
+regolith (0 is retracted, the digging position, SPEC 2.1); once the lift reads down, the chain
+runs at `chain_speed_pct` and the robot creeps forward at `creep_speed_pct` for the trench's
+`creep_m`, then digs standing. It stops at `dig_target_kg` in the bin (`ble:load.kg`, polled)
+or after `dig_max_s`, stops the BLE (chain, and the lift's hold, so the watchdog has
+nothing left to guard) and the wheels, and marks the trench dug so no later
+spot repeats it. A chain that brings nothing in (outside the digging region, or the lift not
+down) fails the step instead of spinning for the whole run.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ramp.autonomy.executive.step import Step
+from ramp.autonomy.odometry import between
+from ramp.statemachine import Status
+
+LOWERED = 0.05  # lift position that counts as down
+LOWER_TIMEOUT_S = 15.0  # a full stroke takes about 10 s (SPEC 2.1)
+NOTHING_IN_S = 15.0  # digging this long with the load not rising: something is wrong
+RESEND_S = 0.25
+
+
+class Excavate(Step):
+    def begin(self, now: float) -> None:
+        robot = self.kit.robot
+        self.phase = "lowering"
+        self.dig_began = math.nan
+        self.load0 = 0.0
+        self.crept = 0.0
+        self.creeping = False
+        self.sent_at = -math.inf
+        self.odom0 = self.kit.perception.odometry.pose
+        robot.moving = True
+        robot.send("ble:lift.pos=(0.0)")
+        robot.poll_now()
+
+    def step(self, now: float, dt: float) -> Status:
+        kit, robot, s = self.kit, self.kit.robot, self.kit.settings
+        if self.phase == "lowering":
+            if robot.fresh(self.started_at) and robot.lift_pos <= LOWERED:
+                self.phase = "digging"
+                self.dig_began = now
+                self.load0 = robot.load_kg
+                robot.send(f"ble:chain.vel=({round(s.chain_speed_pct)})")
+                self.creeping = True
+            elif now - self.started_at > LOWER_TIMEOUT_S:
+                return Status.failed(f"the ladder did not come down (lift at "
+                                     f"{robot.lift_pos:.2f})")
+            return Status.running()
+        load = robot.load_kg
+        if math.isfinite(load):
+            self.ctx.bin_kg = load
+        self.crept = between(self.odom0, kit.perception.odometry.pose)[0]
+        creep_m = self.ctx.dig_sites.config.creep_m if self.ctx.dig_sites else 0.3
+        if self.creeping and self.crept >= creep_m:
+            self.creeping = False
+            robot.halt_base()
+        elif self.creeping and now - self.sent_at >= RESEND_S:
+            robot.drive(round(s.creep_speed_pct), 0.0)
+            self.sent_at = now
+        robot.moving = True  # the chain runs: keep the watchdog fed
+        digging_s = now - self.dig_began
+        if load >= s.dig_target_kg or digging_s >= s.dig_max_s:
+            return self._finish(load, digging_s)
+        if digging_s > NOTHING_IN_S and load - self.load0 < 0.2:
+            robot.send("ble:ble.stop=()")
+            robot.halt_base()
+            return Status.failed(f"no regolith came in after {digging_s:.0f} s of digging")
+        return Status.running()
+
+    def end(self) -> None:
+        # Left before the target (the run's end sent it home, a fault, an operator): a spot
+        # that gave regolith has its trench now, and is not dug again.
+        if self.phase == "digging" and self.kit.robot.load_kg - self.load0 >= 1.0:
+            self._mark_dug()
+
+    def _finish(self, load: float, digging_s: float) -> Status:
+        robot = self.kit.robot
+        robot.send("ble:ble.stop=()")  # the chain, and the lift's hold: nothing left armed
+        robot.halt_base()
+        robot.moving = False
+        self._mark_dug()
+        return Status.done(f"{load:.1f} kg in the bin after {digging_s:.0f} s of digging")
+
+    def _mark_dug(self) -> None:
+        ctx = self.ctx
+        spot = ctx.dig_spot
+        if spot is not None:
+            if ctx.dig_sites is not None:
+                ctx.dig_sites.mark_dug(spot, max(0.0, self.crept))
+            ctx.dig_spots_done.append(spot)
+            ctx.dig_spot = None
+        self.phase = "dug"

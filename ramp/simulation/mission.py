@@ -1,0 +1,314 @@
+"""`ramp sim mission`: a whole RMC run in the simulator (SPEC 6.3), and `run_mission` for
+`ramp sim campaign`.
+
+One scheduler and one clock carry everything: the arena world, the backend (a real
+`Supervisor` whose sim backplane moves the world, its Sabertooth buses behind ptys), the
+Hokuyo emulator on loopback TCP, the IMU and gimbal emulators, and on the other side the
+autonomy exactly as `ramp-autonomy` runs it on the robot (`ramp.autonomy.executive.Autonomy`):
+its real drivers, its MCP link to the backend over TCP, the executive and the mission machine.
+On the virtual clock a 10-minute run takes seconds and the same arguments give the same run;
+with `realtime` it runs on the wall clock and serves MCP on a port an operator can use.
+
+What comes out:
+
+- every state change, as it happens (`on_change`);
+- the trace (SPEC 6.3 `--trace`): a header with the true world, then the ground truth every
+  0.1 s of simulated time, for anyone to referee the run (`ramp.simulation.referee`);
+- the summary: `outcome` (`completed`, `waiting_for_operator` or `error`), `delivered_kg`,
+  `collisions`, `crater_entries` (the world's referee counts), `states_visited`,
+  `localization_losses`, `sim_time_s`, `wall_time_s`, `seed`, `start_box`, `heading`,
+  `fault`, and more (`MissionRun.summary`).
+
+The run ends when the mission is done, when it waits for an operator (unless `realtime`,
+where an operator can come), or `END_GRACE_S` after the run's time at the latest.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+from firmware_like.marte import MarteWorld
+from firmware_like.world_file import load_world
+from ramp.autonomy.config import AutonomyConfig
+from ramp.autonomy.executive.autonomy import Autonomy
+from ramp.autonomy.executive.kit import Detect, Localize
+from ramp.simulation.backend import SimBackend
+from ramp.simulation.rig import Rig, load_autonomy_config
+from ramp.statemachine import StateChange
+
+log = logging.getLogger("ramp.sim.mission")
+
+QUALIFY_KG = 10.0  # SPEC 6.3: exit 0 with at least this delivered, no collision, no crater
+TRACE_HZ = 10.0
+END_GRACE_S = 5.0  # past the run's time, for the last stop to land
+START_BOXES = ("left", "right")
+HEADINGS = (0, 90, 180, 270)
+FAULTS = ("none", "gyro-drift", "imu-shift")
+
+
+@dataclass
+class MissionOptions:
+    """Everything that makes a run; the same options give the same run on virtual time."""
+
+    seed: int = 0
+    start_box: str | None = None  # None: from the seed (or the world file)
+    heading: int | None = None
+    fault: str = "none"
+    duration: float = 600.0
+    world: str | None = None  # a world file (SPEC 6.1); else `MarteWorld.seeded(seed)`
+    config: str | None = None  # autonomy.yaml; default the repository's
+    realtime: bool = False
+    port: int = 0  # with realtime: where the backend serves MCP
+
+
+@dataclass
+class Sample:
+    """One trace line's truth (SPEC 6.3)."""
+
+    t: float
+    x: float
+    y: float
+    yaw: float  # degrees
+    lift: float
+    bin_kg: float
+    delivered_kg: float
+    state: str
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"t": round(self.t, 3), "x": round(self.x, 4), "y": round(self.y, 4),
+                "yaw": round(self.yaw, 3), "lift": round(self.lift, 4),
+                "bin_kg": round(self.bin_kg, 3), "delivered_kg": round(self.delivered_kg, 3),
+                "state": self.state}
+
+
+@dataclass
+class MissionRun:
+    """One run: build it, `run()` it, read `summary()`."""
+
+    options: MissionOptions
+    localize: Localize | None = None
+    detect: Detect | None = None
+    on_change: Callable[[StateChange], None] | None = None
+    trace_file: IO[str] | None = None
+    samples: list[Sample] = field(default_factory=list)
+    changes: list[StateChange] = field(default_factory=list)
+    #: Watchers of the run (the `--record` recorder): each may have `started(run)`,
+    #: `sampled(run, now)` (10 Hz), `changed(run, change)` and `finished(run)`.
+    observers: list[Any] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        o = self.options
+        if o.fault not in FAULTS:
+            raise ValueError(f"fault {o.fault!r} is not one of {', '.join(FAULTS)}")
+        if not (math.isfinite(o.duration) and o.duration > 0):
+            raise ValueError(f"duration {o.duration!r} must be a positive number of seconds")
+        self.world = make_world(o)
+        self.config = mission_config(load_autonomy_config(o.config), o.duration)
+        self.error = ""
+        self.stop_requested = False  # `request_stop()`: end the run at the next tick
+        self.wall_s = 0.0
+        self.started_at = math.nan
+        self.ended_at = math.nan
+        self.backend: SimBackend | None = None
+        self.rig: Rig | None = None
+        self.autonomy: Autonomy | None = None
+
+    # -- the run ---------------------------------------------------------------------------------
+    def build(self) -> None:
+        o = self.options
+        clock = None
+        if o.realtime:
+            from ramp.clock import MonotonicClock
+
+            clock = MonotonicClock()
+        self.backend = SimBackend(self.world, clock=clock, port=o.port)
+        self.rig = Rig(self.world, self.config, seed=o.seed, fault=o.fault,
+                       run_length_s=o.duration, backend=self.backend, stream=False)
+        self.autonomy = Autonomy(self.rig.scheduler, self.rig.perception, self.config,
+                                 self.backend.address, localize=self.localize,
+                                 detect=self.detect)
+        self.autonomy.mission.add_listener(self._changed)
+        self.rig.scheduler.add_task("sim.trace", TRACE_HZ, self._sample)
+
+    def run(self) -> dict[str, Any]:
+        """Run to the end; the summary. Exceptions end the run as `error`."""
+        wall0 = time.perf_counter()
+        try:
+            if self.autonomy is None:
+                self.build()
+            assert self.rig is not None and self.autonomy is not None
+            if self.trace_file is not None:
+                header = {**self.world.describe(), "seed": self.options.seed,
+                          "fault": self.options.fault, "duration": self.options.duration}
+                self.trace_file.write(json.dumps(header) + "\n")
+            clock = self.rig.clock
+            self.started_at = clock.now()
+            self._notify("started")
+            self.autonomy.start(self.started_at)
+            end = self.started_at + self.options.duration + END_GRACE_S
+            mission = self.autonomy.mission
+            waiting_ends = not self.options.realtime
+
+            def over() -> bool:
+                return (mission.over or self.stop_requested or clock.now() >= end
+                        or (waiting_ends and mission.state == "waiting_for_operator"))
+
+            self.rig.scheduler.run(over)
+            self.ended_at = clock.now()
+            self.rig.run_for(0.5)  # the last stop reaches the wheels, the trace shows it
+        except KeyboardInterrupt:  # Ctrl-C (or SIGTERM, see the CLI) ends a --realtime run
+            self.error = "interrupted"
+            if self.rig is not None:
+                self.ended_at = self.rig.clock.now()
+        except Exception as exc:  # noqa: BLE001 - the run's outcome, reported as `error`
+            log.exception("mission run failed")
+            self.error = f"{type(exc).__name__}: {exc}"
+            if math.isnan(self.ended_at) and self.rig is not None:
+                self.ended_at = self.rig.clock.now()
+        finally:
+            self.wall_s = time.perf_counter() - wall0
+            self._notify("finished")
+            self.close()
+        return self.summary()
+
+    def request_stop(self) -> None:
+        """End the run at the next tick (an observer that has seen enough, Ctrl-C)."""
+        self.stop_requested = True
+
+    def close(self) -> None:
+        if self.autonomy is not None:
+            self.autonomy.close()
+        if self.rig is not None:
+            self.rig.close()
+        elif self.backend is not None:
+            self.backend.close()
+
+    # -- what it says --------------------------------------------------------------------------
+    @property
+    def outcome(self) -> str:
+        if self.error or self.autonomy is None:
+            return "error"
+        state = self.autonomy.mission.state
+        if state == "done":
+            return "completed"
+        if state == "waiting_for_operator":
+            return "waiting_for_operator"
+        return "error"
+
+    def summary(self) -> dict[str, Any]:
+        o, w = self.options, self.world
+        start = w.start
+        sim_s = (self.ended_at - self.started_at) if math.isfinite(self.started_at) else 0.0
+        ctx = self.autonomy.context if self.autonomy is not None else None
+        visited: list[str] = []
+        for c in self.changes:
+            if c.dest not in visited:
+                visited.append(c.dest)
+        doc: dict[str, Any] = {
+            "outcome": self.outcome,
+            "delivered_kg": round(w.delivered_kg, 3),
+            "sim_time_s": round(sim_s, 2),
+            "wall_time_s": round(self.wall_s, 2),
+            "collisions": w.collisions,
+            "crater_entries": w.crater_entries,
+            "states_visited": visited,
+            "localization_losses": ctx.localization_losses if ctx is not None else 0,
+            "seed": o.seed,
+            "start_box": start.box if start is not None else o.start_box,
+            "heading": int(round(start.heading_deg)) if start is not None else o.heading,
+            "fault": o.fault,
+            "duration_s": o.duration,
+            "world": w.layout.source,
+            "qualified": bool(w.delivered_kg >= QUALIFY_KG and w.collisions == 0
+                              and w.crater_entries == 0),
+            "deposits": ctx.deposits if ctx is not None else 0,
+            "faults": ctx.faults if ctx is not None else 0,
+            "spilled_kg": round(w.spilled_kg, 3),
+            "excavated_kg": round(w.excavated_kg, 3),
+            "collision_log": [[round(t, 2), what] for t, what in w.collision_log],
+            "crater_log": [[round(t, 2), what] for t, what in w.crater_log],
+            "final_state": self.autonomy.mission.state if self.autonomy else "",
+            "last_problem": ctx.last_problem if ctx is not None else "",
+            "rtf": round(sim_s / self.wall_s, 1) if self.wall_s > 0 else None,
+        }
+        if self.error:
+            doc["error"] = self.error
+        return doc
+
+    # -- tasks and listeners -------------------------------------------------------------------
+    def mission_time(self, t: float) -> float:
+        """Seconds since the mission started (clock time `t`)."""
+        return t - self.started_at if math.isfinite(self.started_at) else 0.0
+
+    def _changed(self, change: StateChange) -> None:
+        self.changes.append(change)
+        if self.on_change is not None:
+            self.on_change(change)
+        self._notify("changed", change)
+
+    def _notify(self, hook: str, *args: Any) -> None:
+        for observer in self.observers:
+            fn = getattr(observer, hook, None)
+            if fn is not None:
+                fn(self, *args)
+
+    def _sample(self, now: float, dt: float) -> None:
+        w = self.world
+        state = self.autonomy.mission.state if self.autonomy is not None else "idle"
+        s = Sample(w.time, w.x, w.y, w.heading_deg, w.lift_pos, w.bin_kg, w.delivered_kg, state)
+        self.samples.append(s)
+        if self.trace_file is not None:
+            self.trace_file.write(json.dumps(s.as_dict()) + "\n")
+        self._notify("sampled", now)
+
+
+def make_world(o: MissionOptions) -> MarteWorld:
+    """The arena: a world file (its start unless a box or heading is given), or the seed's."""
+    if o.start_box is not None and o.start_box not in START_BOXES:
+        raise ValueError(f"start box {o.start_box!r} is not one of {', '.join(START_BOXES)}")
+    if o.heading is not None and o.heading not in HEADINGS:
+        raise ValueError(f"heading {o.heading!r} is not one of {HEADINGS}")
+    if o.world is None:
+        return MarteWorld.seeded(o.seed, o.start_box,
+                                 None if o.heading is None else float(o.heading))
+    layout = load_world(o.world)
+    if o.start_box is not None or o.heading is not None:
+        from dataclasses import replace
+
+        from firmware_like.arena import StartSpec
+
+        old = layout.start
+        box = o.start_box or (old.box if old is not None else "left")
+        heading = float(o.heading) if o.heading is not None else (
+            old.heading_deg if old is not None else 0.0)
+        layout = replace(layout, start=StartSpec(box, heading))
+    return MarteWorld(seed=o.seed, layout=layout)
+
+
+def mission_config(config: AutonomyConfig, duration: float) -> AutonomyConfig:
+    """The autonomy's config with the run's length (`--duration`) as the mission's."""
+    from dataclasses import replace
+    from types import MappingProxyType
+
+    mission = dict(config.mission)
+    mission["duration_s"] = float(duration)
+    return replace(config, mission=MappingProxyType(mission))
+
+
+def run_mission(seed: int, start_box: str, heading: int, fault: str = "none",
+                duration: float = 600.0) -> dict[str, Any]:
+    """One simulated mission's SPEC 6.3 summary, for `ramp sim campaign`."""
+    run = MissionRun(MissionOptions(seed=seed, start_box=start_box, heading=heading,
+                                    fault=fault, duration=duration))
+    return run.run()
+
+
+def write_trace(path: str | Path) -> IO[str]:
+    return open(path, "w", encoding="utf-8")  # noqa: SIM115 - closed by the caller

@@ -1,0 +1,218 @@
+"""`ramp sim mission`: one whole RMC run in the simulator, from the command line (SPEC 6.3).
+
+    ramp sim mission [--seed N] [--start-box left|right] [--heading 0|90|180|270]
+                     [--world FILE] [--fault none|gyro-drift|imu-shift] [--duration 600]
+                     [--config autonomy.yaml] [--json] [--trace FILE] [--plot FILE.png]
+                     [--record FILE.mcap] [--realtime [--port P]]
+
+Without `--start-box`/`--heading` the seed chooses them the way `ramp sim campaign` does
+((seed mod 8) walks left/right x 0/90/180/270), so a campaign's run repeats alone from its
+seed; with `--world` the file's start holds unless they are given. Prints each state change
+as it happens, then a summary (`--json`: the last line is SPEC 6.3's JSON object).
+
+Exit status: 0 when at least 10 kg were delivered with no collision and no crater entry, 1
+when the run did not qualify, 2 on a usage, world-file or config error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import signal
+import sys
+from pathlib import Path
+from typing import Any
+
+HEADINGS = (0, 90, 180, 270)
+REALTIME_PORT = 5577  # `ramp run`'s port: what ramp-shell and ramp-teleop try first
+
+
+def add_mission_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "mission", help="run a whole RMC mission: backend, emulators and the autonomy",
+        description="Run the backend, every emulator and the autonomy together on one "
+                    "virtual clock (the autonomy over real MCP and SCIP TCP connections), "
+                    "print each state change and a summary. The same arguments give the "
+                    "same run.")
+    where = p.add_argument_group("world (the SPEC 6.1 arena)")
+    where.add_argument("--seed", type=int, default=0, metavar="N",
+                       help="seed of the layout, the start, the sensors' noise and the "
+                            "fault (default 0)")
+    where.add_argument("--start-box", choices=("left", "right"), default=None,
+                       help="start box (default: from the seed, as ramp sim campaign does)")
+    where.add_argument("--heading", type=int, choices=HEADINGS, default=None,
+                       help="start heading in degrees (default: from the seed)")
+    where.add_argument("--world", metavar="FILE",
+                       help="world file (YAML: start, rocks, craters) instead of a seeded "
+                            "layout")
+    p.add_argument("--fault", choices=("none", "gyro-drift", "imu-shift"), default="none",
+                   help="IMU fault to inject (SPEC 6.2; default none)")
+    p.add_argument("--duration", type=float, default=600.0, metavar="S",
+                   help="the run's length in simulated seconds (default 600)")
+    p.add_argument("--config", metavar="FILE",
+                   help="the autonomy's config (default: the repository's autonomy.yaml)")
+    p.add_argument("--json", action="store_true",
+                   help="end with one JSON object (the summary) as the last line")
+    p.add_argument("--trace", metavar="FILE",
+                   help="write the ground truth as JSON lines: a header with the true world, "
+                        "then t, x, y, yaw, lift, bin_kg, delivered_kg, state every 0.1 s")
+    p.add_argument("--plot", metavar="FILE.png",
+                   help="draw the arena, true and detected obstacles, planned and driven "
+                        "paths")
+    p.add_argument("--record", metavar="FILE.mcap",
+                   help="record the autonomy's view (mission state, true and estimated "
+                        "pose) into an MCAP file")
+    p.add_argument("--realtime", action="store_true",
+                   help="run on the wall clock and serve MCP (see --port) so an operator "
+                        "can watch with ramp-shell or ramp-teleop and take over")
+    p.add_argument("--port", type=int, default=None, metavar="P",
+                   help=f"with --realtime: the MCP port (default {REALTIME_PORT}; 0 picks "
+                        "a free one)")
+    p.set_defaults(func=cmd_mission)
+
+
+class UsageError(Exception):
+    """A bad argument: `ramp sim mission: what was expected`, exit 2."""
+
+
+def cmd_mission(args: argparse.Namespace) -> int:
+    try:
+        return _mission(args)
+    except UsageError as exc:
+        print(f"ramp sim mission: {exc}", file=sys.stderr)
+        return 2
+
+
+def _mission(args: argparse.Namespace) -> int:
+    from firmware_like.world_file import WorldFileError
+    from ramp.errors import ConfigErrors
+    from ramp.simulation.campaign import combination
+    from ramp.simulation.mission import MissionOptions, MissionRun
+
+    if not (math.isfinite(args.duration) and args.duration > 0):
+        raise UsageError(f"--duration: expected a positive number of seconds, got "
+                         f"{args.duration:g}")
+    if args.port is not None and not args.realtime:
+        raise UsageError("--port: only with --realtime (the virtual-time run serves MCP on "
+                         "a loopback port of its own)")
+    if args.port is not None and not 0 <= args.port <= 65535:
+        raise UsageError(f"--port: expected 0-65535, got {args.port}")
+    box, heading = args.start_box, args.heading
+    if args.world is None and box is None and heading is None:
+        box, heading = combination(args.seed)
+    options = MissionOptions(seed=args.seed, start_box=box, heading=heading, fault=args.fault,
+                             duration=args.duration, world=args.world, config=args.config,
+                             realtime=args.realtime,
+                             port=(REALTIME_PORT if args.port is None else args.port)
+                             if args.realtime else 0)
+    logging.basicConfig(level=logging.ERROR, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        trace = open(args.trace, "w", encoding="utf-8") if args.trace else None  # noqa: SIM115
+    except OSError as exc:
+        raise UsageError(f"--trace: cannot write {args.trace}: {exc.strerror or exc}") from exc
+    try:
+        try:
+            run = MissionRun(options, trace_file=trace)
+            run.on_change = lambda change: _print_change(run, change)
+        except WorldFileError as exc:
+            for err in exc.errors:
+                print(err, file=sys.stderr)
+            return 2
+        except ConfigErrors as exc:
+            for problem in exc.errors:
+                print(problem, file=sys.stderr)
+            return 2
+        except ValueError as exc:
+            raise UsageError(str(exc)) from exc
+        recorder = None
+        if args.record:
+            from ramp.simulation.mission_record import MissionRecorder
+
+            recorder = MissionRecorder(args.record)
+            run.observers.append(recorder)
+        if args.realtime:
+            run.build()
+            assert run.backend is not None
+            host, port = run.backend.address
+            print(f"ramp sim mission: running on the wall clock; MCP on {host}:{port} "
+                  f"(watch: ramp-shell {host}:{port}; take over: "
+                  "robot:control.acquire=(operator)); Ctrl-C ends the run", flush=True)
+            signal.signal(signal.SIGTERM, _interrupt)
+        summary = run.run()
+    finally:
+        if trace is not None:
+            trace.close()
+    if args.trace:
+        summary["trace"] = args.trace
+        summary["referee"] = _referee(args.trace)
+    if args.plot:
+        try:
+            from ramp.simulation.mission_plot import draw_mission
+        except ImportError as exc:
+            raise UsageError("--plot needs matplotlib: pip install 'ramp[plot]'") from exc
+        draw_mission(run, args.plot)
+        summary["plot"] = args.plot
+    if args.record:
+        summary["record"] = args.record
+    for line in describe(summary):
+        print(line)
+    if args.json:
+        print(json.dumps(summary))
+    return 0 if summary["qualified"] else 1
+
+
+def _interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def _print_change(run: Any, change: Any) -> None:
+    t = run.mission_time(change.t)
+    print(f"{t:7.1f} s  {change.source} -> {change.dest} ({change.reason})", flush=True)
+
+
+def _referee(path: str) -> dict[str, Any]:
+    """The trace refereed on its own (`ramp.simulation.referee`), as a cross-check."""
+    from ramp.simulation.referee import TraceError, referee
+
+    try:
+        r = referee(Path(path))
+    except TraceError as exc:  # a run that failed before its first sample
+        return {"error": str(exc)}
+    return {"collisions": r.collisions, "crater_entries": r.crater_entries,
+            "delivered_at_collector_kg": round(r.delivered_at_collector_kg, 3),
+            "delivered_elsewhere_kg": round(r.delivered_elsewhere_kg, 3),
+            "qualifies": r.qualifies}
+
+
+def describe(s: dict[str, Any]) -> list[str]:
+    """The summary in a few lines a person reads."""
+    out = [f"{s['world']}: start {s['start_box']} box heading {s['heading']}, fault "
+           f"{s['fault']}, {s['duration_s']:g} s run",
+           f"  outcome       {s['outcome']} (final state {s['final_state']})",
+           f"  delivered     {s['delivered_kg']:.2f} kg in {s['deposits']} deposit(s) "
+           f"({s['excavated_kg']:.2f} kg dug, {s['spilled_kg']:.2f} kg spilled)",
+           f"  collisions    {s['collisions']}, crater entries {s['crater_entries']}",
+           f"  localization  {s['localization_losses']} loss(es), {s['faults']} fault(s) "
+           "recovered or not",
+           f"  time          {s['sim_time_s']:.1f} s simulated in {s['wall_time_s']:.1f} s "
+           f"({s['rtf'] or 0:.0f}x real time)",
+           "  " + ("QUALIFIED: >= 10 kg, no collision, no crater entry" if s["qualified"]
+                   else "not qualified (needs >= 10 kg, no collision, no crater entry)")]
+    if s.get("last_problem"):
+        out.insert(5, f"  last problem  {s['last_problem']}")
+    if s.get("error"):
+        out.insert(1, f"  error         {s['error']}")
+    if "referee" in s:
+        r = s["referee"]
+        if "error" in r:
+            out.append(f"  trace         {s['trace']}: not refereed: {r['error']}")
+        else:
+            out.append(f"  trace         {s['trace']}: refereed {r['collisions']} "
+                       f"collision(s), {r['crater_entries']} crater entr(y/ies), "
+                       f"{r['delivered_at_collector_kg']:.2f} kg at the collector")
+    for key in ("plot", "record"):
+        if s.get(key):
+            out.append(f"  {key:13s} {s[key]}")
+    return out
