@@ -2,6 +2,9 @@
 
 - `FoxgloveLive` (`foxglove_live.py`): a Foxglove WebSocket server fed like the flight
   recorder (`add_channel`, `publish`), off the tick; `ramp-autonomy --foxglove-port P`.
+- `AutonomyView` (`view.py`): the autonomy's own view (state, estimated pose, numbers,
+  scans, map) as Foxglove messages on any such sink; `ramp sim mission --record` writes the
+  same through the flight recorder, with the simulator's truth beside it.
 - `tee` (`tee.py`): one producer feeding a recording and the live view at once.
 - `protocol.py`: the `foxglove.websocket.v1` messages, sans I/O.
 
@@ -16,5 +19,7 @@ from ramp.autonomy.live.foxglove_live import (
     LiveViewError,
 )
 from ramp.autonomy.live.tee import Tee, tee
+from ramp.autonomy.live.view import AutonomyView
 
-__all__ = ["DEFAULT_HOST", "ClientStats", "FoxgloveLive", "LiveViewError", "Tee", "tee"]
+__all__ = ["DEFAULT_HOST", "AutonomyView", "ClientStats", "FoxgloveLive", "LiveViewError",
+           "Tee", "tee"]

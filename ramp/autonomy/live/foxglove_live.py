@@ -308,6 +308,12 @@ class FoxgloveLive:
             self._channels = {**self._channels, spec.topic: channel}
         self._call(self._advertise, channel)
 
+    def wants(self, topic: str) -> bool:
+        """Whether a message on `topic` would go anywhere now (a subscriber, or a latched
+        channel's last message), so a producer can skip building one nobody watches."""
+        channel = self._channels.get(topic)
+        return channel is not None and (bool(channel.clients) or channel.latched)
+
     def publish(self, t: float, topic: str, payload: Mapping[str, Any]) -> None:
         """Stream a payload on a declared channel to its subscribers (cheap; never waits)."""
         channel = self._channels.get(topic)

@@ -2,8 +2,9 @@
 
 A sink is anything with the flight recorder's publishing shape: `start(now)`,
 `add_channel(spec)`, `publish(t, topic, payload)`, `close()` and a `timebase` with
-`ns(t)` once started (`ramp.recorder.Recorder`, `FoxgloveLive`). The tee has the same shape,
-so code written for a Recorder takes a tee unchanged:
+`ns(t)` once started (`ramp.recorder.Recorder`, `FoxgloveLive`), and optionally
+`wants(topic)` (`FoxgloveLive`: does anyone watch it now). The tee has the same shape, so
+code written for a Recorder takes a tee unchanged:
 
     sink = tee(recorder_or_None, live_or_None)   # the absent ones are left out
     sink.add_channel(spec); sink.start(clock.now()); sink.publish(t, topic, payload)
@@ -54,6 +55,14 @@ class Tee:
     def publish(self, t: float, topic: str, payload: Mapping[str, Any]) -> None:
         for sink in self.sinks:
             sink.publish(t, topic, payload)
+
+    def wants(self, topic: str) -> bool:
+        """Whether any sink takes `topic` now (one that cannot say takes everything)."""
+        for sink in self.sinks:
+            wants = getattr(sink, "wants", None)
+            if wants is None or wants(topic):
+                return True
+        return False
 
     def close(self) -> None:
         for sink in self.sinks:
