@@ -1,6 +1,7 @@
 """`ramp-autonomy`: the autonomy on the robot, and the check of its config (SPEC 6.3).
 
     ramp-autonomy --backend HOST:PORT [--config autonomy.yaml] [--start-box left|right]
+                  [--foxglove-port P]
     ramp-autonomy check FILE
 
 The first runs the RMC mission on the robot: the drivers `autonomy.yaml` names (the Hokuyo
@@ -11,7 +12,12 @@ the simulator (`ramp.autonomy.executive.Autonomy`), an MCP client of the backend
 went wrong) to stderr, for journald. It ends when the mission is done (exit 0); a mission
 waiting for its operator keeps running, since an operator can take over, put things right
 and hand control back. SIGINT or SIGTERM stop the robot (`robot:robot.stop=()`) and end it
-(exit 0). Exit 2 on a usage or config error.
+(exit 0). Exit 2 on a usage or config error, or when `--foxglove-port` cannot listen.
+
+`--foxglove-port P` streams the autonomy's view live to Foxglove over its WebSocket protocol
+(`ramp.autonomy.live`: the mission state, the estimated pose, the numbers, the scans and the
+map, the channels `ramp sim mission --record` writes), on 127.0.0.1:P (0 picks a free port);
+it prints `ramp-autonomy: foxglove live on ws://HOST:PORT` once listening.
 
 `check` validates `autonomy.yaml` without touching any hardware, as `ramp check` validates
 `ramp.yaml` (exit 1 when it has errors, each as `file:line: key.path: what was expected`).
@@ -51,7 +57,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="ramp-autonomy",
         description="The RAMP autonomy: the RMC mission as an MCP client of the backend.",
         usage="ramp-autonomy --backend HOST:PORT [--config autonomy.yaml] "
-              "[--start-box left|right]\n       ramp-autonomy check FILE")
+              "[--start-box left|right] [--foxglove-port P]\n"
+              "       ramp-autonomy check FILE")
     parser.add_argument("--backend", metavar="HOST:PORT",
                         help="the backend's MCP address (default: the config's backend)")
     parser.add_argument("--config", default=DEFAULT_CONFIG, metavar="FILE",
@@ -59,6 +66,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--start-box", choices=("left", "right"), default=None,
                         help="the start box, when the team is told (default: the first "
                              "localization tries both)")
+    parser.add_argument("--foxglove-port", type=int, default=None, metavar="P",
+                        help="stream the autonomy's view live to Foxglove (WebSocket, "
+                             "foxglove.websocket.v1) on 127.0.0.1:P; 0 picks a free port, "
+                             "printed (needs the `foxglove` extra)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     check = sub.add_parser("check", help="validate an autonomy.yaml without touching hardware")
     check.add_argument("file", metavar="FILE", help="the autonomy config, e.g. autonomy.yaml")
@@ -104,6 +115,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"ramp-autonomy: --backend: {exc}", file=sys.stderr)
         return 2
+    port = args.foxglove_port
+    if port is not None and not 0 <= port <= 65535:
+        print(f"ramp-autonomy: --foxglove-port: expected 0-65535, got {port}", file=sys.stderr)
+        return 2
     for kind, name in (("imu", cfg.imu.driver), ("gimbal", cfg.gimbal.driver)):
         if name == "sim":
             print(f"ramp-autonomy: {args.config}: {kind}.driver: 'sim' runs only in the "
@@ -111,15 +126,17 @@ def cmd_run(args: argparse.Namespace) -> int:
             return 2
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    return run_on_robot(cfg, backend, start_box=args.start_box)
+    return run_on_robot(cfg, backend, start_box=args.start_box, foxglove_port=port)
 
 
 def run_on_robot(cfg: AutonomyConfig, backend: tuple[str, int], *,
-                 start_box: str | None = None) -> int:
+                 start_box: str | None = None, foxglove_port: int | None = None) -> int:
     """The mission on real hardware, on the wall clock, until done or a signal."""
     from ramp.autonomy.executive.autonomy import Autonomy
     from ramp.autonomy.hal import driver_class
     from ramp.autonomy.hal.hokuyo import HokuyoLidar
+    from ramp.autonomy.live import FoxgloveLive, LiveViewError
+    from ramp.autonomy.live.view import LATCHED, VIEW_HZ, AutonomyView
     from ramp.autonomy.perception.stack import Perception
     from ramp.clock import MonotonicClock
     from ramp.errors import DeviceError
@@ -129,6 +146,15 @@ def run_on_robot(cfg: AutonomyConfig, backend: tuple[str, int], *,
     clock = MonotonicClock()
     scheduler = Scheduler(clock, 100.0)
     now = clock.now()
+    live = None
+    if foxglove_port is not None:  # before any device: a port in use changes nothing
+        live = FoxgloveLive(port=foxglove_port, name="ramp-autonomy", latched=LATCHED)
+        try:
+            live.start(now)
+        except LiveViewError as exc:
+            print(f"ramp-autonomy: --foxglove-port: {exc}", file=sys.stderr)
+            return 2
+        print(f"ramp-autonomy: foxglove live on {live.url}", flush=True)
     lidar = HokuyoLidar(f"{cfg.lidar.host}:{cfg.lidar.port}", clock=clock, loop=scheduler)
     imu = driver_class("imu", cfg.imu.driver)(cfg.imu)
     pan_tilt = driver_class("gimbal", cfg.gimbal.driver)(cfg.gimbal)
@@ -142,6 +168,10 @@ def run_on_robot(cfg: AutonomyConfig, backend: tuple[str, int], *,
             log.error("%s", exc)   # this one) and then for an operator
     lidar.start()  # scans on demand: the mission asks for them (Perception.start's steps)
     autonomy = Autonomy(scheduler, perception, cfg, backend, start_box=start_box)
+    view = None
+    if live is not None:  # after the mission's task, so each sample sees that tick's work
+        view = AutonomyView.watching(live, autonomy)
+        scheduler.add_task("autonomy.view", VIEW_HZ, view.tick)
     stopping: list[str] = []
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
@@ -161,8 +191,12 @@ def run_on_robot(cfg: AutonomyConfig, backend: tuple[str, int], *,
             end = clock.now() + STOP_FLUSH_S
             scheduler.run(lambda: clock.now() >= end)
     finally:
+        if view is not None:
+            view.close()
         autonomy.close()
         perception.close()
+        if live is not None:
+            live.close()
     log.info("ramp-autonomy: mission %s (%s)", autonomy.mission.outcome,
              autonomy.mission.state)
     return 0

@@ -3,7 +3,7 @@
     ramp sim mission [--seed N] [--start-box left|right] [--heading 0|90|180|270]
                      [--world FILE] [--fault none|gyro-drift|imu-shift] [--duration 600]
                      [--config autonomy.yaml] [--json] [--trace FILE] [--plot FILE.png]
-                     [--record FILE.mcap] [--realtime [--port P]]
+                     [--record FILE.mcap] [--foxglove-port P] [--realtime [--port P]]
 
 Without `--start-box`/`--heading` the seed chooses them the way `ramp sim campaign` does
 ((seed mod 8) walks left/right x 0/90/180/270), so a campaign's run repeats alone from its
@@ -64,6 +64,10 @@ def add_mission_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser])
     p.add_argument("--record", metavar="FILE.mcap",
                    help="record the autonomy's view (mission state, true and estimated "
                         "pose) into an MCAP file")
+    p.add_argument("--foxglove-port", type=int, default=None, metavar="P",
+                   help="stream the same channels live to Foxglove over its WebSocket "
+                        "protocol on 127.0.0.1:P (0 picks a free port; printed); best with "
+                        "--realtime")
     p.add_argument("--realtime", action="store_true",
                    help="run on the wall clock and serve MCP (see --port) so an operator "
                         "can watch with ramp-shell or ramp-teleop and take over")
@@ -99,6 +103,8 @@ def _mission(args: argparse.Namespace) -> int:
                          "a loopback port of its own)")
     if args.port is not None and not 0 <= args.port <= 65535:
         raise UsageError(f"--port: expected 0-65535, got {args.port}")
+    if args.foxglove_port is not None and not 0 <= args.foxglove_port <= 65535:
+        raise UsageError(f"--foxglove-port: expected 0-65535, got {args.foxglove_port}")
     box, heading = args.start_box, args.heading
     if args.world is None and box is None and heading is None:
         box, heading = combination(args.seed)
@@ -126,14 +132,11 @@ def _mission(args: argparse.Namespace) -> int:
             return 2
         except ValueError as exc:
             raise UsageError(str(exc)) from exc
-        recorder = None
-        if args.record:
-            from ramp.simulation.mission_record import MissionRecorder
-
-            recorder = MissionRecorder(args.record)
-            run.observers.append(recorder)
+        if args.record or args.foxglove_port is not None:
+            _watch(run, args)
         if args.realtime:
-            run.build()
+            if run.autonomy is None:
+                run.build()
             assert run.backend is not None
             host, port = run.backend.address
             print(f"ramp sim mission: running on the wall clock; MCP on {host}:{port} "
@@ -161,6 +164,33 @@ def _mission(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(summary))
     return 0 if summary["qualified"] else 1
+
+
+def _watch(run: Any, args: argparse.Namespace) -> None:
+    """`--record` and `--foxglove-port`: the autonomy's view (and the truth) into a file, to
+    Foxglove live, or both. The live view listens before the run, so its address is known."""
+    from ramp.simulation.mission_record import MissionRecorder
+
+    live = None
+    if args.foxglove_port is not None:
+        from ramp.autonomy.live import FoxgloveLive
+        from ramp.autonomy.live.view import LATCHED
+
+        live = FoxgloveLive(port=args.foxglove_port, name="ramp sim mission", latched=LATCHED)
+    watcher = MissionRecorder(args.record, live=live)
+    run.observers.append(watcher)
+    if live is None:
+        return
+    from ramp.autonomy.live import LiveViewError
+
+    run.build()
+    try:
+        watcher.start(run.rig.clock.now())
+    except LiveViewError as exc:
+        watcher.abandon()
+        run.close()
+        raise UsageError(f"--foxglove-port: {exc}") from exc
+    print(f"ramp sim mission: foxglove live on {live.url}", flush=True)
 
 
 def _interrupt(signum: int, frame: Any) -> None:
