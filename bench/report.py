@@ -293,6 +293,19 @@ def render(doc: dict[str, Any]) -> str:
                 f"LIDAR time; one whole `ramp sim perceive` flow is {f['simulated_s']} "
                 f"simulated s for {f['cpu_s']} s of CPU, of which the localizer "
                 f"{f['localize_cpu_s']} s and the detector {f['detect_cpu_s']} s.", ""]
+    m = doc.get("mission")
+    if m and "error" not in m:
+        out += [f"**mission** (`ramp sim mission` on the default seed, {m['simulated_s']:g} "
+                "simulated s: world, backend, emulators, drivers, perception, executive and "
+                "mission on one virtual clock; baseline: `world.step` alone over the same "
+                "time)", "", HEAD,
+                _row("real-time factor", m["real_time_factor"], "x"),
+                _row("CPU s per simulated minute", m["cpu_s_per_simulated_minute"], " s"),
+                "", f"A 10-minute mission takes {m['ten_minutes_wall_s']} s of wall time at "
+                f"this rate; this run ended `{m['outcome']}` ({m['final_state']}), "
+                f"{m['delivered_kg']} kg delivered, {m['collisions']} collisions, "
+                f"{m['crater_entries']} crater entries. Wall time by part: "
+                + ", ".join(f"{k} {v} %" for k, v in m["wall_pct_by_part"].items()) + ".", ""]
     return "\n".join(out)
 
 
