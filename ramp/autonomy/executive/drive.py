@@ -10,18 +10,19 @@ localizer needs the robot standing still, so it stops to localize:
   robot should know where it really is before it turns;
 - before a leg driven backwards (docking) and at the end when asked (`final_fix`).
 
-It plans again from where the robot really is (`replan`, when given) after a fix before a
-turn (the planner then checks the turn's sweep from the true pose: the follower stops a few
-centimetres off the planned corner, and a turn near a wall has no more room than that),
-after a fix that puts the robot more than `REPLAN_OFF_M` off the leg it drives, and after it
-went off the path. When the grid finds no new plan from there (a way through a gap a few
-centimetres wider than the robot, found by the search over headings from a pose a few
-centimetres away), the rest of the old plan, joined from where the robot stands, is driven on
-if it passes the same exact check (`check`, `Planner.accepts`); only if it does not is the
-search over headings (seconds of work where it finds nothing) run again. A fix mid-stretch
-that agrees with the plan keeps it, so the route does not change its mind at every stop. A fix
-that fails is tried once more (re-levelled first when the localizer says where level is);
-still lost -> `lost`, and it never drives without a pose: the robot stops first.
+After a fix before a turn, after a fix that puts the robot more than `REPLAN_OFF_M` off the
+leg it drives, and after it went off the path, it checks the way on from where the robot
+really is: the turn's sweep from the true pose (the follower stops a few millimetres off the
+planned corner, and a turn near a wall has little more room than that). The rest of the plan,
+joined from there (`rejoin`), is kept when it passes the planner's exact check from there
+(`check`, `Planner.accepts`); otherwise it plans again (`replan`): on the grid, then with the
+search over headings (seconds of work where it finds nothing). Keeping a plan that still
+checks matters beyond the saved work: a new plan from beside a spot with no room to turn may
+back away to where the robot can turn and come in again the same way, and arrive beside it
+again, for ever. A fix mid-stretch that agrees with the plan keeps it, so the route does not
+change its mind at every stop. A fix that fails is tried once more (re-levelled first when the
+localizer says where level is); still lost -> `lost`, and it never drives without a pose: the
+robot stops first.
 
 Drive commands go out when they change and at least every `resend_s` while driving (which
 also feeds the backend's watchdog); a stop goes out whenever it stops.
@@ -198,17 +199,16 @@ class PlanDriver:
         return Status.running()
 
     def _plan_from(self, here: Pose) -> list[Path] | str:
-        """Legs from `here`: a new plan on the grid, else the old one rejoined if it passes
-        the exact check, else a new plan searched over headings too; or why there is none."""
+        """Legs from `here`: the old plan rejoined from here if it passes the exact check
+        from here, else a new plan on the grid, else one searched over headings too; or why
+        there is none."""
         assert self.replan is not None
+        legs = rejoin(self.legs[self._leg:], here)
+        if self.check is not None and legs and self.check(legs, here.yaw):
+            return legs
         result = self.replan(here, False)
         if result.ok:
             return list(result.legs)
-        legs = rejoin(self.legs[self._leg:], here)
-        if self.check is not None and legs and self.check(legs, here.yaw):
-            log.info("drive: no new plan on the grid from %s (%s); driving on along the "
-                     "old one", describe_pose(here), result.reason)
-            return legs
         result = self.replan(here, True)
         return list(result.legs) if result.ok else result.reason
 
@@ -228,10 +228,6 @@ class PlanDriver:
             self.kit.robot.halt_base()
             self._sent = (0, 0.0)
         self.kit.robot.moving = False
-
-
-def describe_pose(pose: Pose) -> str:
-    return f"x {pose.x:.2f} y {pose.y:.2f} yaw {math.degrees(pose.yaw):.1f} deg"
 
 
 def off_track(leg: Path, pose: Pose) -> float:
