@@ -1,6 +1,6 @@
 """The executive's pieces on their own: its settings, the pose tracker, the start region's
-plans, the plan home's last leg, the choice of digging spots, and driving on along a plan
-from a pose a little off it."""
+plans, the plan home's last leg, the choice of digging spots, driving on along a plan
+from a pose a little off it, and what a closer look adds to the map."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from firmware_like.marte import MarteWorld
 from ramp.autonomy.config import MISSION_FIELDS, parse_config
 from ramp.autonomy.executive.drive import rejoin
 from ramp.autonomy.executive.kit import Kit
+from ramp.autonomy.executive.look import LOOK_NOTE, merge_obstacles, wants_look
 from ramp.autonomy.executive.plan import (
     START_REGION,
     PlanPathToDig,
@@ -236,3 +237,28 @@ def test_the_planner_accepts_a_rejoined_plan_only_as_clear_as_one_it_would_make(
     assert planner.accepts(clear, 0.0)
     grazing = [Path(np.array([[1.0, 1.94 - 0.15 - 0.375 - 0.01], [3.0, 1.40]]))]
     assert not planner.accepts(grazing, 0.0)
+
+
+# -- the closer look -----------------------------------------------------------------------------
+def test_a_second_look_adds_what_the_first_missed_and_keeps_one_disc_per_obstacle() -> None:
+    first = [Obstacle("rock", 2.22, 2.10, 0.17), Obstacle("crater", 2.14, 2.85, 0.20)]
+    second = [Obstacle("rock", 2.23, 2.11, 0.18),  # the same rock, seen closer
+              Obstacle("rock", 3.22, 1.69, 0.10),  # a small one the first look missed
+              Obstacle("crater", 2.15, 2.84, 0.18)]  # the same crater, smaller this time
+    merged = merge_obstacles(first, second)
+    assert len(merged) == 3
+    assert merged[0] == Obstacle("rock", 2.23, 2.11, 0.18)
+    assert (merged[1].x, merged[1].y, merged[1].d) == (2.15, 2.84, 0.20)  # larger d kept
+    assert merged[2] == Obstacle("rock", 3.22, 1.69, 0.10)
+    # A rock beside a crater is not the crater seen again.
+    assert len(merge_obstacles(first, [Obstacle("rock", 2.14, 2.85, 0.1)])) == 3
+
+
+def test_the_closer_look_is_wanted_once_inside_the_obstacle_region_facing_the_dig() -> None:
+    step = PlanPathToDig.__new__(PlanPathToDig)
+    step.ctx = MissionContext()
+    assert wants_look(step, Pose(2.5, 1.5, math.radians(20.0)))
+    assert not wants_look(step, Pose(1.9, 1.5, 0.0))  # still seen close from the start
+    assert not wants_look(step, Pose(2.5, 1.5, math.radians(170.0)))  # facing home
+    step.ctx.notes[LOOK_NOTE] = True
+    assert not wants_look(step, Pose(2.5, 1.5, 0.0))

@@ -5,7 +5,9 @@
   obstacle region (`plan.plan_vantage`: x = `vantage_x_m` facing +x, on the collector's line
   when it can), then localizes standing there: the sweep's cloud is placed with that pose, and
   a pose 5 cm and 2 deg off would move obstacles 3 m out by 12 cm.
-- **Cross to dig** drives `ctx.plan` to `ctx.dig_spot`.
+- **Cross to dig** drives `ctx.plan` to `ctx.dig_spot`; the first time it stands inside the
+  obstacle region facing the digging region it sweeps again, close up (`look.py`), and goes
+  on on the map that look completed.
 - **Cross home** drives `ctx.plan` (from `PlanPathHome`) to the collector: the approach in
   front of it, a fix there, then straight back, stopping a few centimetres short of the
   wall; Dock finishes on the buttons.
@@ -14,6 +16,7 @@
 from __future__ import annotations
 
 from ramp.autonomy.executive.drive import PlanDriver
+from ramp.autonomy.executive.look import RUNNING, LookAgain, wants_look
 from ramp.autonomy.executive.plan import StartPlanners, plan_home, plan_vantage
 from ramp.autonomy.executive.step import Step
 from ramp.autonomy.planning import PlanResult, Pose
@@ -52,6 +55,7 @@ class PrepareForScan(Step):
 class CrossToDig(Step):
     def begin(self, now: float) -> None:
         self.driver: PlanDriver | None = None
+        self.look: LookAgain | None = None
 
     def step(self, now: float, dt: float) -> Status:
         ctx = self.ctx
@@ -60,10 +64,29 @@ class CrossToDig(Step):
                 return Status.failed("no plan to a digging spot")
             assert ctx.planner is not None
             self.driver = PlanDriver(self, ctx.plan.legs, replan=self._plan,
-                                     check=ctx.planner.accepts)
+                                     check=ctx.planner.accepts,
+                                     look=lambda pose: wants_look(self, pose))
+        if self.driver.paused:
+            return self._look_again(now, self.driver)
         return self.driver.tick(now)
 
+    def _look_again(self, now: float, driver: PlanDriver) -> Status:
+        """The closer look (`look.py`) while the driver waits; then on, on the new map."""
+        if self.look is None:
+            self.look = LookAgain(self)
+            if self.look.start(now):
+                return Status.running()
+        elif self.look.tick(now) == RUNNING:
+            return Status.running()
+        self.look.finish()
+        self.look = None
+        assert self.ctx.planner is not None
+        driver.check = self.ctx.planner.accepts
+        return driver.resume(now)
+
     def end(self) -> None:
+        if self.look is not None:
+            self.look.cancel()
         if self.driver is not None:
             self.driver.cancel()
 

@@ -8,20 +8,23 @@ localizer needs the robot standing still, so it stops to localize:
 - before a turn in place once it has moved since the last fix: a turn sweeps the footprint's
   corners wide, and the planner checked that sweep at the corner the plan put it, so the
   robot should know where it really is before it turns;
-- before a leg driven backwards (docking) and at the end when asked (`final_fix`).
+- before a leg driven backwards (docking) and at the end when asked (`final_fix`);
+- where the caller wants to look around (`look`): after that fix it pauses (`paused`) until
+  the caller calls `resume`, which checks the way on as below.
 
-It plans again from where the robot really is (`replan`, when given) after a fix before a
-turn (the planner then checks the turn's sweep from the true pose: the follower stops a few
-centimetres off the planned corner, and a turn near a wall has no more room than that),
-after a fix that puts the robot more than `REPLAN_OFF_M` off the leg it drives, and after it
-went off the path. When the grid finds no new plan from there (a way through a gap a few
-centimetres wider than the robot, found by the search over headings from a pose a few
-centimetres away), the rest of the old plan, joined from where the robot stands, is driven on
-if it passes the same exact check (`check`, `Planner.accepts`); only if it does not is the
-search over headings (seconds of work where it finds nothing) run again. A fix mid-stretch
-that agrees with the plan keeps it, so the route does not change its mind at every stop. A fix
-that fails is tried once more (re-levelled first when the localizer says where level is);
-still lost -> `lost`, and it never drives without a pose: the robot stops first.
+After a fix before a turn, after a fix that puts the robot more than `REPLAN_OFF_M` off the
+leg it drives, and after it went off the path, it checks the way on from where the robot
+really is: the turn's sweep from the true pose (the follower stops a few millimetres off the
+planned corner, and a turn near a wall has little more room than that). The rest of the plan,
+joined from there (`rejoin`), is kept when it passes the planner's exact check from there
+(`check`, `Planner.accepts`); otherwise it plans again (`replan`): on the grid, then with the
+search over headings (seconds of work where it finds nothing). Keeping a plan that still
+checks matters beyond the saved work: a new plan from beside a spot with no room to turn may
+back away to where the robot can turn and come in again the same way, and arrive beside it
+again, for ever. A fix mid-stretch that agrees with the plan keeps it, so the route does not
+change its mind at every stop. A fix that fails is tried once more (re-levelled first when the
+localizer says where level is); still lost -> `lost`, and it never drives without a pose: the
+robot stops first.
 
 Drive commands go out when they change and at least every `resend_s` while driving (which
 also feeds the backend's watchdog); a stop goes out whenever it stops.
@@ -54,8 +57,9 @@ log = logging.getLogger("ramp.autonomy.executive")
 
 Replan = Callable[[Pose, bool], PlanResult]  # from here; may it search over headings
 Check = Callable[[Sequence[Path], float], bool]  # legs, start yaw -> clear enough to drive
+Look = Callable[[Pose], bool]  # stop here, fix and pause for the caller (`look.py`)?
 
-DRIVING, FIXING = "driving", "fixing"
+DRIVING, FIXING, PAUSED = "driving", "fixing", "paused"
 TURN_FIX_M = 0.25  # moved at least this far since the last fix: localize before turning
 LOW_CONFIDENCE = 0.6  # below this (and above the mission's 0.5), stop and localize
 RESEND_S = 0.25
@@ -68,7 +72,8 @@ class PlanDriver:
     def __init__(self, step: Step, legs: Sequence[Path], *, replan: Replan | None = None,
                  final_fix: bool = False, fix_before_reverse: bool = False,
                  config: FollowerConfig | None = None, max_replans: int | None = None,
-                 relocalize_every_m: float | None = None, check: Check | None = None) -> None:
+                 relocalize_every_m: float | None = None, check: Check | None = None,
+                 look: Look | None = None) -> None:
         if not legs:
             raise ValueError("nothing to drive: the plan has no legs")
         self.step_ = step
@@ -76,6 +81,8 @@ class PlanDriver:
         self.legs = list(legs)
         self.replan = replan
         self.check = check
+        self.look = look
+        self._for_look = False
         self.final_fix = final_fix
         self.fix_before_reverse = fix_before_reverse
         self.config = config or self.kit.follower_config()
@@ -100,9 +107,29 @@ class PlanDriver:
     def leg(self) -> Path:
         return self.legs[self._leg]
 
+    @property
+    def paused(self) -> bool:
+        """Stopped, localized, and waiting for the caller's `resume` (see `look`)."""
+        return self.state == PAUSED
+
+    def resume(self, now: float) -> Status:
+        """Drive on after a pause: the way on checked from where the robot stands, against
+        whatever map `replan` and `check` now use."""
+        self.state = DRIVING
+        pose = self.kit.tracker.estimate()
+        if pose is None:
+            return Status.lost(self.kit.tracker.lost_reason or "no pose")
+        legs = self._plan_from(pose)
+        if isinstance(legs, str):
+            return Status.failed(f"no plan from x {pose.x:.2f} y {pose.y:.2f}: {legs}")
+        self._set_legs(legs)
+        return Status.running()
+
     def tick(self, now: float) -> Status:
         if self.state == FIXING:
             return self._fixing(now)
+        if self.state == PAUSED:
+            return Status.running()
         kit = self.kit
         pose = kit.tracker.estimate()
         if pose is None:
@@ -120,6 +147,9 @@ class PlanDriver:
                 return Status.failed(f"off the path by {abs(cmd.cross_track_m):.2f} m")
             self.replans += 1
             self._off_path = True
+            return self._fix(now)
+        if status == FOLLOWING and self.look is not None and self.look(pose):
+            self._for_look = True
             return self._fix(now)
         moved = kit.tracker.distance_m
         starting_turn = status == TURNING and self._last_status != TURNING
@@ -184,6 +214,10 @@ class PlanDriver:
         if self._final:
             return Status.done(f"arrived at {describe(pose)}")
         self.state = DRIVING
+        if self._for_look:
+            self._for_look = False
+            self.state = PAUSED
+            return Status.running()
         here = Pose(pose.x, pose.y, pose.yaw)
         if self.replan is not None and (self._off_path or self._before_turn
                                         or off_track(self.leg, here) > REPLAN_OFF_M):
@@ -191,24 +225,26 @@ class PlanDriver:
             legs = self._plan_from(here)
             if isinstance(legs, str):
                 return Status.failed(f"no plan from {describe(pose)}: {legs}")
-            self.legs = legs
-            self._leg = 0
-            self._follower = PathFollower(self.leg, self.config)
-            self._last_status = ""
+            self._set_legs(legs)
         return Status.running()
 
+    def _set_legs(self, legs: list[Path]) -> None:
+        self.legs = legs
+        self._leg = 0
+        self._follower = PathFollower(self.leg, self.config)
+        self._last_status = ""
+
     def _plan_from(self, here: Pose) -> list[Path] | str:
-        """Legs from `here`: a new plan on the grid, else the old one rejoined if it passes
-        the exact check, else a new plan searched over headings too; or why there is none."""
+        """Legs from `here`: the old plan rejoined from here if it passes the exact check
+        from here, else a new plan on the grid, else one searched over headings too; or why
+        there is none."""
         assert self.replan is not None
+        legs = rejoin(self.legs[self._leg:], here)
+        if self.check is not None and legs and self.check(legs, here.yaw):
+            return legs
         result = self.replan(here, False)
         if result.ok:
             return list(result.legs)
-        legs = rejoin(self.legs[self._leg:], here)
-        if self.check is not None and legs and self.check(legs, here.yaw):
-            log.info("drive: no new plan on the grid from %s (%s); driving on along the "
-                     "old one", describe_pose(here), result.reason)
-            return legs
         result = self.replan(here, True)
         return list(result.legs) if result.ok else result.reason
 
@@ -228,10 +264,6 @@ class PlanDriver:
             self.kit.robot.halt_base()
             self._sent = (0, 0.0)
         self.kit.robot.moving = False
-
-
-def describe_pose(pose: Pose) -> str:
-    return f"x {pose.x:.2f} y {pose.y:.2f} yaw {math.degrees(pose.yaw):.1f} deg"
 
 
 def off_track(leg: Path, pose: Pose) -> float:
