@@ -35,6 +35,7 @@ from ramp.autonomy.perception.obstacles import (
     fit_plane_ransac,
     kept_points,
     level_scans,
+    wall_offsets,
 )
 from tests.obstacle_scenes import Match, Scene, match, scan_world, sweep_plan
 
@@ -393,3 +394,25 @@ def test_a_wobbling_ahrs_is_levelled_out_scan_by_scan() -> None:
                 or abs(m.diameter_error) > DIAMETER_BOUND or m.position_error > POSITION_BOUND
                 for m in matches if m.truth["d"] >= 0.15)
     assert failures[2] == 0 and failures[0] >= 2
+
+
+def test_a_corner_seen_from_the_start_does_not_tilt_the_wall_behind_into_the_arena() -> None:
+    """Returns of the side walls near the corners lie within the x = 0 wall's search band;
+    fitted with the few of that wall itself, they once made a line across the arena, and
+    every return behind it (two rocks 0.9 m ahead of the robot) was dropped as wall."""
+    world = MarteWorld.seeded(127)
+    scene = scan_world(world, 0.765, 1.367, 0.0, seed=127)
+    cloud = scene.cloud
+    z = cloud.ground_z + 0.9
+    corner = [(x, 3.88, z) for x in np.arange(0.0, 0.30, 0.01)]  # the y = 3.88 wall
+    corner += [(x, 0.0, z) for x in np.arange(0.24, 0.30, 0.01)]  # the y = 0 wall
+    behind = [(0.0, y, z) for y in np.arange(0.06, 0.21, 0.01)]  # the x = 0 wall itself
+    points = np.vstack([cloud.points, np.array(corner + behind)])
+    seen = wall_offsets(replace(cloud, points=points), DetectionParams())[0]
+    if seen is not None:  # the wall where it is, within the search band along its length
+        offset, slope = seen
+        assert abs(offset) < 0.05 and abs(offset + slope * 3.88) < 0.05
+    found = detect_obstacles(cloud).obstacles
+    near = sorted((round(o.x, 1), round(o.y, 1)) for o in found if o.kind == "rock"
+                  and o.x < 2.0)
+    assert near == [(1.7, 1.4), (1.7, 1.8), (1.9, 2.8)]

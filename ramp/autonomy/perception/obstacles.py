@@ -619,6 +619,9 @@ WALLS: tuple[tuple[tuple[float, float], tuple[float, float]], ...] = (
     ((0.0, 0.0), (0.0, 1.0)),  # y = 0, on the right facing +x
     ((0.0, arena.ARENA_WIDTH_M), (0.0, -1.0)),  # y = 3.88, on the left
 )
+#: Each wall's length from its point in `WALLS`, along it (the arena's width, then length).
+WALL_LENGTHS = (arena.ARENA_WIDTH_M, arena.ARENA_WIDTH_M, arena.ARENA_LENGTH_M,
+                arena.ARENA_LENGTH_M)
 
 
 def wall_offsets(cloud: Cloud, p: DetectionParams) -> list[tuple[float, float] | None]:
@@ -630,10 +633,15 @@ def wall_offsets(cloud: Cloud, p: DetectionParams) -> list[tuple[float, float] |
     out: list[tuple[float, float] | None] = []
     high = (pts[:, 2] - cloud.ground_z > p.wall_min_height_m) & (
         pts[:, 2] - cloud.ground_z < p.wall_max_height_m)
-    for (ox, oy), (nx, ny) in WALLS:
+    for ((ox, oy), (nx, ny)), length in zip(WALLS, WALL_LENGTHS, strict=True):
         dist = (pts[:, 0] - ox) * nx + (pts[:, 1] - oy) * ny
         along = -(pts[:, 0] - ox) * ny + (pts[:, 1] - oy) * nx
-        sel = high & (np.abs(dist) < p.wall_search_m)
+        # Not where the next wall runs through the search band: its returns, a line across
+        # this one, would tilt the fit (a corner's returns once made the x = 0 wall cross
+        # the arena diagonally, and every rock beyond it was dropped as behind the wall).
+        ends = ((along > p.wall_search_m + p.wall_margin_m)
+                & (along < length - p.wall_search_m - p.wall_margin_m))
+        sel = high & (np.abs(dist) < p.wall_search_m) & ends
         if int(sel.sum()) < 20:
             out.append(None)
             continue
@@ -647,6 +655,11 @@ def wall_offsets(cloud: Cloud, p: DetectionParams) -> list[tuple[float, float] |
             sol, *_ = np.linalg.lstsq(a, d_[keep], rcond=None)
             fit = (float(sol[0]), float(sol[1]))
             keep = np.abs(d_ - (fit[0] + fit[1] * s_)) < 0.03
+        # A pose a few cm and a degree or two off moves a wall that much; a line further
+        # off than the search band anywhere along the wall is not the wall.
+        if max(abs(fit[0]), abs(fit[0] + fit[1] * length)) > p.wall_search_m:
+            out.append(None)
+            continue
         out.append(fit)
     return out
 
