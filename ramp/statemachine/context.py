@@ -67,9 +67,13 @@ class Estimates:
         """From the digging region to regolith out of the bin."""
         return self.trip_s + self.dock_deposit_s
 
+    def overhead_s(self) -> float:
+        """What a cycle costs besides its dig: out, back, dock, deposit and decouple."""
+        return 2.0 * self.trip_s + self.dock_deposit_s
+
     def cycle_s(self) -> float:
         """From the collector out to dig (at least `min_dig_s`) and back, deposited."""
-        return 2.0 * self.trip_s + self.min_dig_s + self.dock_deposit_s
+        return self.overhead_s() + self.min_dig_s
 
     @staticmethod
     def blend(old: float, measured: float) -> float:

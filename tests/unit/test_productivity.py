@@ -1,0 +1,44 @@
+"""The dig length that makes a run deliver the most (SPEC 6.3 Productivity)."""
+
+from __future__ import annotations
+
+import pytest
+
+from ramp.statemachine import Estimates
+from ramp.statemachine.productivity import plan_dig
+
+# A cycle's overhead of 2 x 50 + 30 = 130 s; the return 80 s; a full bin 120 s of digging.
+EST = Estimates(trip_s=50.0, dock_deposit_s=30.0, min_dig_s=30.0)
+FULL_S = 120.0
+
+
+def test_with_time_for_one_full_bin_and_a_second_it_digs_the_bin_full_first() -> None:
+    # 500 s left: 500 - 30 - 80 = 390 s; two cycles dig 390 - 130 = 260 s -> 2 x 120 (full).
+    plan = plan_dig(500.0, 30.0, EST, FULL_S)
+    assert plan.cycles == 2
+    assert plan.dig_s == pytest.approx(FULL_S)
+
+
+def test_two_cycles_that_cannot_both_fill_the_bin_share_the_dig_time() -> None:
+    # 400 s left: 290 s to dig; two cycles: 160 s, 80 s each (one cycle: only 120 s).
+    plan = plan_dig(400.0, 30.0, EST, FULL_S)
+    assert plan.cycles == 2
+    assert plan.dig_s == pytest.approx(80.0)
+
+
+def test_near_the_end_the_last_dig_is_shorter_so_the_deposit_lands_before_the_end() -> None:
+    # 170 s left: the return (80 s) and the margin (30 s) leave 60 s of digging, not 120.
+    plan = plan_dig(170.0, 30.0, EST, FULL_S)
+    assert plan.cycles == 1
+    assert plan.dig_s == pytest.approx(60.0)
+
+
+def test_with_no_time_to_dig_it_plans_no_dig() -> None:
+    assert plan_dig(100.0, 30.0, EST, FULL_S).dig_s == 0.0
+
+
+def test_a_second_cycle_whose_dig_would_be_shorter_than_the_shortest_is_not_planned() -> None:
+    # 290 s left: 180 s to dig; two cycles would dig 25 s each (< 30 s): one dig of 120 s.
+    plan = plan_dig(290.0, 30.0, EST, FULL_S)
+    assert plan.cycles == 1
+    assert plan.dig_s == pytest.approx(FULL_S)
