@@ -40,6 +40,15 @@ from dataclasses import dataclass
 from multiprocessing import get_context
 from typing import Any
 
+from ramp.simulation.arguments import (
+    ArgumentError,
+    check_cluster,
+    check_duration,
+    check_runs,
+    check_seed,
+    check_workers,
+)
+
 DEFAULT_MISSION = "ramp.simulation.mission:run_mission"
 FAULTS = ("none", "gyro-drift", "imu-shift")
 START_BOXES = ("left", "right")  # SPEC 6.1 (ramp.autonomy.arena has the same)
@@ -268,12 +277,14 @@ def main(args: argparse.Namespace) -> int:
         return 2
     err = Console(stderr=True)
     try:
-        if args.workers is not None and args.workers < 1:
-            raise CampaignError(f"--workers must be at least 1, got {args.workers}")
-        if args.cluster is not None and "://" not in args.cluster:
-            raise CampaignError(f"--cluster {args.cluster!r}: expected tcp://HOST:PORT")
-        if not args.duration > 0:
-            raise CampaignError(f"--duration must be > 0, got {args.duration}")
+        try:
+            check_runs(args.runs)
+            check_seed(args.seed, args.runs)
+            check_workers(args.workers)
+            check_cluster(args.cluster)
+            check_duration(args.duration)
+        except ArgumentError as exc:
+            raise CampaignError(str(exc)) from exc
         specs = plan_runs(args.runs, args.seed, args.fault, args.duration, args.mission)
         load_mission(args.mission)  # fail here, not in every worker
         workers = None if args.cluster else min(args.workers or default_workers(), len(specs))

@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import math
 import signal
 import sys
 from pathlib import Path
@@ -92,12 +91,15 @@ def cmd_mission(args: argparse.Namespace) -> int:
 def _mission(args: argparse.Namespace) -> int:
     from firmware_like.world_file import WorldFileError
     from ramp.errors import ConfigErrors
+    from ramp.simulation.arguments import ArgumentError, check_duration, check_seed
     from ramp.simulation.campaign import combination
     from ramp.simulation.mission import MissionOptions, MissionRun
 
-    if not (math.isfinite(args.duration) and args.duration > 0):
-        raise UsageError(f"--duration: expected a positive number of seconds, got "
-                         f"{args.duration:g}")
+    try:
+        check_seed(args.seed)
+        check_duration(args.duration)
+    except ArgumentError as exc:
+        raise UsageError(str(exc)) from exc
     if args.port is not None and not args.realtime:
         raise UsageError("--port: only with --realtime (the virtual-time run serves MCP on "
                          "a loopback port of its own)")

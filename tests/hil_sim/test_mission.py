@@ -181,6 +181,8 @@ def test_the_same_arguments_give_the_same_run() -> None:
     (["--heading", "45"], "invalid choice"),
     (["--start-box", "middle"], "invalid choice"),
     (["--duration", "-5"], "--duration: expected a positive number"),
+    (["--duration", "1e308"], "--duration: expected a positive number"),
+    (["--seed", "-1"], "--seed: expected a whole number"),
     (["--port", "5577"], "--port: only with --realtime"),
     (["--fault", "wobble"], "invalid choice"),
 ])
