@@ -478,6 +478,12 @@ class MarteWorld:
         if moved:
             self._clamp_to_arena()
 
+    def contacts(self) -> list[str]:
+        """What the footprint touches now (walls, rocks, craters), as the referee names
+        them; empty when it stands clear."""
+        hits, craters = self._contacts()
+        return sorted(hits | craters)
+
     def _contacts(self) -> tuple[set[str], set[str]]:
         """(what the footprint collides with, craters it overlaps) now, by SPEC 6.1."""
         p, a = self.params, self.arena

@@ -289,7 +289,14 @@ def make_world(o: MissionOptions) -> MarteWorld:
         heading = float(o.heading) if o.heading is not None else (
             old.heading_deg if old is not None else 0.0)
         layout = replace(layout, start=StartSpec(box, heading))
-    return MarteWorld(seed=o.seed, layout=layout)
+    world = MarteWorld(seed=o.seed, layout=layout)
+    touching = world.contacts()
+    if touching:  # a start in contact would be a collision the summary never counts
+        s = world.start_pose
+        raise ValueError(f"{o.world}: the start at x {s.x:.3f}, y {s.y:.3f}, yaw "
+                         f"{s.yaw_deg:.1f} touches {', '.join(touching)}; expected a start "
+                         "clear of the walls and obstacles")
+    return world
 
 
 def mission_config(config: AutonomyConfig, duration: float) -> AutonomyConfig:
