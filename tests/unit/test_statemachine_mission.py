@@ -400,6 +400,8 @@ def test_statuses_map_to_triggers_and_mcp_errors() -> None:
     assert Status.running().trigger is None and Status.done().trigger == "finished"
     assert Status.from_mcp_error("not_owner", "operator holds control").trigger == \
         "control_taken"
+    assert Status.from_mcp_error("interlocked", "lift raised").trigger == "control_taken"
+    assert Status.needs_operator("lift stalled").trigger == "needs_operator"
     fault = Status.from_mcp_error("not_attached", "ble")
     assert fault.trigger == "fault" and fault.reason == "not_attached: ble"
     with pytest.raises(ValueError, match="says why"):
