@@ -143,3 +143,15 @@ def test_registers_under_the_sim_subcommands() -> None:
         (5, 0, "none", None, None, False)
     assert args.mission == "ramp.simulation.mission:run_mission" and callable(args.func)
     assert load_mission(CHEAP) is campaign_missions.arithmetic
+
+
+def test_randomize_reaches_every_run_and_the_report() -> None:
+    from ramp.simulation.campaign import plan_runs, report, run_one
+
+    mission = "tests.unit.campaign_missions:says_randomized"
+    specs = plan_runs(3, 5, mission=mission, randomize=True)
+    rows = [run_one(s) for s in specs]
+    assert [r["delivered_kg"] for r in rows] == [20.0, 20.0, 20.0]
+    assert report(specs, rows, workers=1, cluster=None, wall_time_s=0.0)["randomize"] is True
+    plain = plan_runs(1, 5, mission=mission)
+    assert run_one(plain[0])["delivered_kg"] == 0.0
