@@ -37,6 +37,7 @@ from collections.abc import Callable, Iterable
 from typing import Protocol
 
 from ramp.clock import Clock
+from ramp.common.hostport import parse_hostport
 from ramp.errors import ProtocolError
 from ramp.mcp.messages import Request
 from ramp.mcp.session import McpSession, Reply
@@ -72,24 +73,10 @@ def parse_backend(address: str | tuple[str, int]) -> tuple[str, int]:
     """`HOST:PORT`, `[v6]:PORT` or (host, port) -> (host, port); ValueError says why."""
     if isinstance(address, tuple):
         host, port = address
-    else:
-        text = address.strip()
-        if text.startswith("["):
-            host, sep, rest = text[1:].partition("]")
-            if not sep or not rest.startswith(":"):
-                raise ValueError(f"{address!r}: expected [ADDRESS]:PORT")
-            port_text = rest[1:]
-        else:
-            host, sep, port_text = text.rpartition(":")
-            if not sep:
-                raise ValueError(f"{address!r}: expected HOST:PORT (for example "
-                                 "192.168.0.20:5577)")
-        if not port_text.isdigit():
-            raise ValueError(f"{address!r}: the port must be a number")
-        port = int(port_text)
-    if not host or not 0 < int(port) < 65536:
-        raise ValueError(f"{address!r}: expected a host and a port 1-65535")
-    return str(host), int(port)
+        if not host or not 0 < int(port) < 65536:
+            raise ValueError(f"{address!r}: expected a host and a port 1-65535")
+        return str(host), int(port)
+    return parse_hostport(address)
 
 
 class McpLink:

@@ -56,6 +56,7 @@ from ramp.autonomy.hal.lidar import (
     ScanGeometry,
 )
 from ramp.clock import Clock, MonotonicClock
+from ramp.common.hostport import parse_hostport
 from ramp.scheduler import Scheduler
 
 log = logging.getLogger("ramp.autonomy.hokuyo")
@@ -82,29 +83,9 @@ class IoLoop(Protocol):
 
 
 def parse_address(text: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
-    """`host:port`, `host`, `[v6]:port` -> (host, port); ValueError with the reason."""
-    text = text.strip()
-    if not text:
-        raise ValueError("empty LIDAR address (expected HOST:PORT, e.g. 192.168.0.10:10940)")
-    if text.startswith("["):
-        host, sep, rest = text[1:].partition("]")
-        if not sep:
-            raise ValueError(f"{text!r}: unclosed '[' in an IPv6 address")
-        port_text = rest[1:] if rest.startswith(":") else ""
-        if rest and not rest.startswith(":"):
-            raise ValueError(f"{text!r}: expected [ADDRESS]:PORT")
-    elif text.count(":") == 1:
-        host, _, port_text = text.partition(":")
-    else:
-        host, port_text = text, ""
-    if not host:
-        raise ValueError(f"{text!r}: no host")
-    port = default_port
-    if port_text:
-        if not port_text.isdigit() or not 0 < int(port_text) < 65536:
-            raise ValueError(f"{text!r}: port must be 1-65535")
-        port = int(port_text)
-    return host, port
+    """`host:port`, `host`, `[v6]:port` -> (host, port) (`ramp.common.hostport`, the port
+    defaulting to SCIP's); ValueError with the reason."""
+    return parse_hostport(text, default_port=default_port, example=DEFAULT_ADDRESS)
 
 
 @dataclass
