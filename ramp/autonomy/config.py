@@ -23,7 +23,7 @@ from typing import Any
 from ramp.autonomy.hal import DRIVERS
 from ramp.autonomy.mount import Mount
 from ramp.common.hostport import format_hostport, parse_hostport
-from ramp.common.yamlload import LinedMap, YamlError, kind_of, parse, read_text
+from ramp.common.yamlload import LinedMap, YamlError, kind_of, parse_mapping, read_text
 from ramp.errors import ConfigError, ConfigErrors
 from ramp.schema import Field
 
@@ -272,16 +272,10 @@ def check_config(path: str | Path) -> tuple[AutonomyConfig | None, list[ConfigEr
 def parse_config(text: str, name: str = "autonomy.yaml"
                  ) -> tuple[AutonomyConfig | None, list[ConfigError]]:
     try:
-        root = parse(text)
+        root = parse_mapping(text, "a mapping of sections")
     except YamlError as exc:
         return None, [ConfigError(exc.problem, file=name, line=exc.line)]
     c = _Checker(name)
-    if root is None:
-        root = LinedMap()
-        root.line = 1
-    if not isinstance(root, LinedMap):
-        c.err("", 1, f"expected a mapping of sections at the top, got {kind_of(root)}")
-        return None, c.errors
     for k in root:
         if k not in TOP_KEYS:
             c.err(str(k), root.line_of(k),

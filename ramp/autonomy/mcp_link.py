@@ -110,14 +110,6 @@ class McpLink:
 
     # -- state ------------------------------------------------------------------------------
     @property
-    def host(self) -> str:
-        return self.client.host
-
-    @property
-    def port(self) -> int:
-        return self.client.port
-
-    @property
     def address(self) -> str:
         return self.client.address
 

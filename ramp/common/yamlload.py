@@ -273,6 +273,17 @@ def parse(text: str) -> Any:
     return _run(text, lambda loader: loader.get_single_data())
 
 
+def parse_mapping(text: str, what: str = "a mapping") -> LinedMap:
+    """A document that must be a mapping (an empty one is an empty mapping at line 1);
+    YamlError `expected {what} at the top, got ...` otherwise."""
+    root = parse(text)
+    if root is None:
+        return LinedMap(1)
+    if not isinstance(root, LinedMap):
+        raise YamlError(f"expected {what} at the top, got {kind_of(root)}", 1)
+    return root
+
+
 def compose(text: str) -> yaml.Node | None:
     """One YAML document as PyYAML nodes (for readers that walk marks), with the same limits
     as `parse`; YamlError."""

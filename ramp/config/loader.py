@@ -32,7 +32,7 @@ from ramp.common.yamlload import (
     LinedMap,
     YamlError,
     kind_of,
-    parse,
+    parse_mapping,
     read_text,
 )
 from ramp.errors import ConfigError, ConfigErrors
@@ -195,16 +195,10 @@ def _has_content(text: str) -> bool:
 
 def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, list[ConfigError]]:
     try:
-        root = parse(text)
+        root = parse_mapping(text, "a mapping of sections")
     except YamlError as exc:
         return None, [ConfigError(exc.problem, file=name, line=exc.line)]
     c = _Checker(name)
-    if root is None:
-        root = LinedMap()
-        root.line = 1
-    if not isinstance(root, LinedMap):
-        c.err("", 1, f"expected a mapping of sections at the top, got {kind_of(root)}")
-        return None, c.errors
     _report_bad_keys(c, root)
     top = {"server", "watchdog", "scheduler", "buses", "modules", "recorder"}
     for k in root:

@@ -140,14 +140,6 @@ class HokuyoLidar(Lidar):
 
     # -- addresses and loop hooks ---------------------------------------------------------------
     @property
-    def host(self) -> str:
-        return self.client.host
-
-    @property
-    def port(self) -> int:
-        return self.client.port
-
-    @property
     def address(self) -> str:
         return self.client.address
 
