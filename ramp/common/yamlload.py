@@ -21,14 +21,14 @@ their key path and turn it into their own error type. Nothing here knows any fil
 
 from __future__ import annotations
 
-import errno
 import os
-import stat
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import yaml
+
+from ramp.common.files import NotRegularFile, open_regular, why
 
 #: A YAML input RAMP reads is a few kB; anything past this is refused before parsing.
 MAX_FILE_BYTES = 1 << 20
@@ -116,19 +116,15 @@ def read_text(path: str | Path, *, max_bytes: int = MAX_FILE_BYTES,
               what: str = "a YAML file") -> str:
     """The text of a regular file of at most `max_bytes`; YamlError naming the file otherwise.
 
-    The file is opened non-blocking (a FIFO with no writer would wait forever) and checked
-    with fstat on the open descriptor, so what is checked is what is read."""
+    The file is opened by `ramp.common.files.open_regular` (never waits on a FIFO; checks
+    the open descriptor), and its size is checked before a byte is read."""
     name = str(path)
     try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | getattr(os, "O_CLOEXEC", 0))
-    except OSError as exc:
-        raise YamlError(f"cannot read: {_why(exc)}", file=name) from None
+        fd, size = open_regular(path)
+    except NotRegularFile as exc:
+        raise YamlError(exc.reason, file=name) from None
     try:
-        info = os.fstat(fd)
-        if not stat.S_ISREG(info.st_mode):
-            raise YamlError(f"cannot read: {_not_regular(info.st_mode)}; expected a regular "
-                            "file", file=name)
-        if info.st_size > max_bytes:
+        if size > max_bytes:
             raise YamlError(f"larger than {max_bytes // 1024} KiB; {what} is a few kB",
                             file=name)
         chunks: list[bytes] = []
@@ -136,10 +132,8 @@ def read_text(path: str | Path, *, max_bytes: int = MAX_FILE_BYTES,
         while got <= max_bytes:
             try:
                 chunk = os.read(fd, max_bytes + 1 - got)
-            except BlockingIOError:  # pragma: no cover - regular files never say so
-                continue
             except OSError as exc:
-                raise YamlError(f"cannot read: {_why(exc)}", file=name) from None
+                raise YamlError(f"cannot read: {why(exc)}", file=name) from None
             if not chunk:
                 break
             chunks.append(chunk)
@@ -167,21 +161,6 @@ def load_file(path: str | Path, *, max_bytes: int = MAX_FILE_BYTES,
         return parse(text)
     except YamlError as exc:
         raise exc.in_file(str(path)) from None
-
-
-def _why(exc: OSError) -> str:
-    if exc.errno == errno.ENOENT:
-        return "no such file"
-    return exc.strerror or str(exc)
-
-
-def _not_regular(mode: int) -> str:
-    for test, what in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (pipe)"),
-                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
-                       (stat.S_ISSOCK, "a socket")):
-        if test(mode):
-            return f"it is {what}"
-    return "it is not a regular file"
 
 
 # --------------------------------------------------------------------------- parsing
