@@ -14,18 +14,19 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from ramp.autonomy.planning import (
-    ArenaMap,
-    DigSites,
-    DigSpot,
-    Disc,
-    DockApproach,
-    Planner,
-    PlanResult,
-    Pose,
-)
+if TYPE_CHECKING:  # for the field types only: the machine runs without the autonomy loaded
+    #   (the executive imports the machine; the machine must not import it back)
+    from ramp.autonomy.planning import (
+        DigSites,
+        DigSpot,
+        Disc,
+        DockApproach,
+        Planner,
+        PlanResult,
+        Pose,
+    )
 
 
 @dataclass
@@ -126,7 +127,3 @@ class MissionContext:
     def pose_is_confident(self, threshold: float) -> bool:
         """True when there is a pose and the localizer trusts it at least `threshold`."""
         return self.pose is not None and self.pose_confidence >= threshold
-
-    def detected_map(self) -> ArenaMap:
-        """The arena with what was detected, for a planner."""
-        return ArenaMap(obstacles=tuple(self.rocks) + tuple(self.craters))
