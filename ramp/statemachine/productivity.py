@@ -6,8 +6,10 @@ load, so the fewest cycles that the bin can hold are the most productive. At the
 each dig the time left, less the margin and the return, is the dig time still to spend; every
 further cycle costs its overhead (`Estimates.overhead_s`: out, back, dock, deposit) of it. The
 plan picks the number of cycles that digs the most, a full bin (`full_s` of digging) being the
-most one cycle can carry, and splits the dig time evenly between them: this dig gets its
-share. Near the end that is a shorter dig, never none while a dig of `min_dig_s` fits.
+most one cycle can carry. This dig takes as much of that as it can, up to a full bin, leaving
+each later cycle at least `min_dig_s`: the estimates are only what was measured so far, and a
+later cycle that no longer fits (a slow way home) then costs its share, not this load. Near
+the end that is a shorter dig, never none while a dig of `min_dig_s` fits.
 """
 
 from __future__ import annotations
@@ -41,5 +43,6 @@ def plan_dig(left_s: float, margin_s: float, est: Estimates, full_s: float) -> D
             break
         dug = min(dig_total, n * full_s)
         if dug > best_dug + 1e-9:
-            best, best_dug = DigPlan(min(share, full_s), n), dug
+            this = min(full_s, dig_total - (n - 1) * est.min_dig_s)
+            best, best_dug = DigPlan(this, n), dug
     return best

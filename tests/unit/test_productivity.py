@@ -19,11 +19,17 @@ def test_with_time_for_one_full_bin_and_a_second_it_digs_the_bin_full_first() ->
     assert plan.dig_s == pytest.approx(FULL_S)
 
 
-def test_two_cycles_that_cannot_both_fill_the_bin_share_the_dig_time() -> None:
-    # 400 s left: 290 s to dig; two cycles: 160 s, 80 s each (one cycle: only 120 s).
+def test_two_cycles_that_cannot_both_fill_the_bin_fill_the_first() -> None:
+    # 400 s left: 290 s to dig; two cycles dig 160 s (one cycle: only 120 s). The first
+    # takes a full bin and leaves the second its 40 s: if the second no longer fits (a slow
+    # way home), the run has the bigger load already.
     plan = plan_dig(400.0, 30.0, EST, FULL_S)
     assert plan.cycles == 2
-    assert plan.dig_s == pytest.approx(80.0)
+    assert plan.dig_s == pytest.approx(FULL_S)
+    # 370 s left: two cycles dig 130 s (one: 120 s); the first 100 s, the second its 30 s
+    plan = plan_dig(370.0, 30.0, EST, FULL_S)
+    assert plan.cycles == 2
+    assert plan.dig_s == pytest.approx(100.0)
 
 
 def test_near_the_end_the_last_dig_is_shorter_so_the_deposit_lands_before_the_end() -> None:
