@@ -60,17 +60,21 @@ class Estimates:
     write them too.
     """
 
-    trip_s: float = 60.0  # one way between the collector and a digging spot, planning included
+    trip_s: float = 60.0  # out, from the collector to a digging spot, planning included
     dock_deposit_s: float = 60.0  # dock, deposit and decouple at the collector
     min_dig_s: float = 30.0  # the shortest dig worth a trip
+    #: Back, from a digging spot to the collector's approach. Measured apart from the way
+    #: out: the way home ends with the docking approach and is often the longer one, and
+    #: twice the longer of the two made a second cycle look 60 s longer than it was.
+    home_s: float = 60.0
 
     def return_s(self) -> float:
         """From the digging region to regolith out of the bin."""
-        return self.trip_s + self.dock_deposit_s
+        return self.home_s + self.dock_deposit_s
 
     def overhead_s(self) -> float:
         """What a cycle costs besides its dig: out, back, dock, deposit and decouple."""
-        return 2.0 * self.trip_s + self.dock_deposit_s
+        return self.trip_s + self.home_s + self.dock_deposit_s
 
     def cycle_s(self) -> float:
         """From the collector out to dig (at least `min_dig_s`) and back, deposited."""

@@ -8,7 +8,7 @@ from ramp.statemachine import Estimates
 from ramp.statemachine.productivity import plan_dig
 
 # A cycle's overhead of 2 x 50 + 30 = 130 s; the return 80 s; a full bin 120 s of digging.
-EST = Estimates(trip_s=50.0, dock_deposit_s=30.0, min_dig_s=30.0)
+EST = Estimates(trip_s=50.0, dock_deposit_s=30.0, min_dig_s=30.0, home_s=50.0)
 FULL_S = 120.0
 
 
@@ -48,3 +48,11 @@ def test_a_second_cycle_whose_dig_would_be_shorter_than_the_shortest_is_not_plan
     plan = plan_dig(290.0, 30.0, EST, FULL_S)
     assert plan.cycles == 1
     assert plan.dig_s == pytest.approx(FULL_S)
+
+
+def test_a_cycle_counts_the_way_out_and_the_way_home_each_once() -> None:
+    # Randomized seed 1: out 64 s, home 119 s, dock and deposit 35 s. Twice the longer leg
+    # made a cycle 303 s and ended the run at 320 s with 279 s left; it takes 248 s.
+    est = Estimates(trip_s=64.0, dock_deposit_s=35.0, min_dig_s=30.0, home_s=119.0)
+    assert est.cycle_s() == pytest.approx(64.0 + 119.0 + 30.0 + 35.0)
+    assert est.return_s() == pytest.approx(119.0 + 35.0)
