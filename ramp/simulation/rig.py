@@ -129,12 +129,12 @@ class Rig:
             self._tasks.append(self.scheduler.add_task("sim.world", rate, self._step_world))
         self.gimbal_emulator: PanTiltEmulator = gimbal_emulator(self.clock, cfg.gimbal)
         m = cfg.lidar.mount
-        lidar = replace(LidarParams(), mount_x=m.x, mount_y=m.y, mount_z=m.z)
+        true_mount = replace(LidarParams(), mount_x=m.x, mount_y=m.y, mount_z=m.z)
         imu_model = None
         if randomization is not None:  # the true mount and gyro; the autonomy keeps its own
-            lidar = randomization.lidar_params(lidar)
+            true_mount = randomization.lidar_params(true_mount)
             imu_model = randomization.imu_model()
-        self.view = LidarView.of(world, lidar, seed=seed)
+        self.view = LidarView.of(world, true_mount, seed=seed)
         self._gimbal_times: deque[float] = deque()
         self._gimbal_angles: deque[tuple[float, float]] = deque()
         self.lidar_emulator = HokuyoEmulator(self.clock, self.range_source, port=0)
