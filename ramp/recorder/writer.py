@@ -103,11 +103,16 @@ class TimeBase:
         return self.t0 + (log_time_ns - self.origin_ns) / 1e9
 
 
-def recording_files(directory: Path, pause: Callable[[], None] | None = None
-                    ) -> list[tuple[int, Path]]:
-    """The recorder's own files in `directory`, oldest first, as (index, path); `pause` is
-    called every SCAN_SLICE entries (the writer thread sleeps there, so a tick waiting for
-    the interpreter lock gets it)."""
+def recording_files(directory: Path) -> list[tuple[int, Path]]:
+    """The recorder's own files in `directory`, oldest first, as (index, path)."""
+    return [(i, directory / name) for i, name in recording_names(directory)]
+
+
+def recording_names(directory: Path, pause: Callable[[], None] | None = None
+                    ) -> list[tuple[int, str]]:
+    """The recorder's own files in `directory`, oldest first, as (index, file name);
+    `pause` is called every SCAN_SLICE entries (the writer thread sleeps there, so a tick
+    waiting for the interpreter lock gets it)."""
     found: dict[int, str] = {}
     with contextlib.suppress(FileNotFoundError, NotADirectoryError), os.scandir(directory) as it:
         for n, entry in enumerate(it, 1):
@@ -116,7 +121,7 @@ def recording_files(directory: Path, pause: Callable[[], None] | None = None
                 found[int(m.group(1))] = entry.name
             if pause is not None and n % SCAN_SLICE == 0:
                 pause()
-    return [(i, directory / found[i]) for i in sorted(found)]
+    return [(i, found[i]) for i in sorted(found)]
 
 
 def _pause() -> None:
@@ -147,11 +152,11 @@ class SegmentWriter:
         self.written = 0
         #: Records written into a file that was deleted or replaced before they were safe.
         self.lost = 0
-        self._ours: deque[tuple[int, Path]] | None = None  # our files, oldest first
+        self._ours: deque[tuple[int, str]] | None = None  # our files' names, oldest first
         self._next_index = 1
         self._identity: tuple[int, int] | None = None  # (st_dev, st_ino) of the open file
         self._checked_written = 0
-        self._pruned: list[str] = []
+        self._pruned: tuple[int, str, str] = (0, "", "")  # (count, first, last) not yet logged
         self._file: IO[bytes] | None = None
         self._mcap: Writer | None = None
         self._ids: dict[str, int] = {}
@@ -175,7 +180,7 @@ class SegmentWriter:
         recorder keeps its own list."""
         self.directory.mkdir(parents=True, exist_ok=True)
         if self._ours is None:
-            existing = recording_files(self.directory, _pause)
+            existing = recording_names(self.directory, _pause)
             self._ours = deque(existing)
             self._next_index = existing[-1][0] + 1 if existing else 1
         stamp = dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%SZ")  # a label only
@@ -218,7 +223,7 @@ class SegmentWriter:
                 path.unlink()  # a full disk must not fill the directory with empty files
             raise
         self.files_opened += 1
-        self._ours.append((index, path))
+        self._ours.append((index, path.name))
         return path
 
     def announce(self) -> None:
@@ -237,24 +242,25 @@ class SegmentWriter:
         ours = self._ours
         done = 0
         while ours is not None and len(ours) > self.keep and done < most:
-            _, old = ours.popleft()
+            index, name = ours.popleft()
             done += 1
-            if old == self.path:
-                ours.appendleft((0, old))  # never the file being written
+            if self.path is not None and name == self.path.name:
+                ours.appendleft((index, name))  # never the file being written
                 break
+            old = self.directory / name
             try:
                 old.unlink()
-                self._pruned.append(old.name)
+                n, first, _ = self._pruned
+                self._pruned = (n + 1, first or name, name)
             except FileNotFoundError:
                 pass  # someone else removed it
             except OSError as exc:
                 log.warning("recorder: cannot remove %s: %s", old, exc.strerror or exc)
-        if self._pruned and self.to_prune == 0:
-            names = self._pruned
-            which = names[0] if len(names) == 1 else f"{len(names)} files ({names[0]} to " \
-                f"{names[-1]})"
+        n, first, last = self._pruned
+        if n and self.to_prune == 0:
+            which = first if n == 1 else f"{n} files ({first} to {last})"
             log.info("recorder: removed %s, keeping the newest %d", which, self.keep)
-            self._pruned = []
+            self._pruned = (0, "", "")
         return done
 
     def still_ours(self) -> bool:
