@@ -66,6 +66,7 @@ POLL_S = 0.05            # how often the thread looks at the queue when it is id
 RETRY_S = 5.0            # after a write error, how long until a new file is tried
 SCAN_SLICE = 256         # directory entries looked at between two pauses (the first scan)
 PRUNE_SLICE = 16         # old files deleted between two pauses
+PRUNE_IN_DRAIN = 2       # ... and between two slices of records, when there is a backlog
 CHUNK_BYTES = 32 << 10   # a chunk is closed at this size (before compression), or on time
 RECORD_OVERHEAD = 47     # bytes of MCAP framing and message index per message (uncompressed)
 #: Every index, message indexes included: Foxglove's reader (@mcap/core) refuses a chunk
@@ -455,6 +456,8 @@ class WriterThread(threading.Thread):
             if n % SLICE_RECORDS == 0:
                 if time.monotonic() - self._last_flush >= self.flush_s:
                     self._flush()
+                if seg.to_prune:  # under a flood the queue never empties: prune as we go
+                    seg.prune(PRUNE_IN_DRAIN)
                 time.sleep(SLICE_PAUSE_S)
 
     def _reopen(self) -> bool:
