@@ -21,6 +21,10 @@ Failures, each named in `fault`:
 - a reply that fails its sums or is cut short: dropped (counted in `stats`), never published.
 
 A host name is resolved once in `start()`, which can block on DNS: give the sensor's IP.
+The socket, the non-blocking connect, the read budget and the back-off are
+`ramp.common.tcpclient.TcpClient`'s, shared with the autonomy's MCP link; the back-off is
+reset only once a whole handshake has passed (a sensor that accepts and then fails keeps
+backing off).
 """
 
 from __future__ import annotations
