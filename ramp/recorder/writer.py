@@ -67,6 +67,7 @@ RETRY_S = 5.0            # after a write error, how long until a new file is tri
 SCAN_SLICE = 256         # directory entries looked at between two pauses (the first scan)
 PRUNE_SLICE = 16         # old files deleted between two pauses
 PRUNE_IN_DRAIN = 2       # ... and between two slices of records, when there is a backlog
+WARN_AGAIN_S = 60.0      # a write failure after this long without one warns again
 CHUNK_BYTES = 32 << 10   # a chunk is closed at this size (before compression), or on time
 RECORD_OVERHEAD = 47     # bytes of MCAP framing and message index per message (uncompressed)
 #: Every index, message indexes included: Foxglove's reader (@mcap/core) refuses a chunk
@@ -393,7 +394,8 @@ class WriterThread(threading.Thread):
         self.final_metadata = final_metadata
         self.bytes_out = 0     # payload bytes taken off the queue (the tick side counts in)
         self.dropped_io = 0    # records lost to write errors (and a deleted file's, below)
-        self.failed_at: float | None = None
+        self.failed_at: float | None = None  # the failure the current retry waits after
+        self._last_failure: float | None = None
         self._stop_event = threading.Event()
         self._last_flush = 0.0
 
@@ -482,8 +484,11 @@ class WriterThread(threading.Thread):
             self._failed(exc)
 
     def _failed(self, exc: Exception) -> None:
-        first = self.failed_at is None
-        self.failed_at = time.monotonic()
+        now = time.monotonic()
+        # One warning per episode: a failure within WARN_AGAIN_S of the last one belongs to
+        # it, even when a new file opened in between (a disk still full takes the header).
+        first = self._last_failure is None or now - self._last_failure >= WARN_AGAIN_S
+        self.failed_at = self._last_failure = now
         path = self.segments.path
         self.segments.abandon()
         if first:
