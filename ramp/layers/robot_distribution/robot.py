@@ -274,9 +274,9 @@ class RobotDistribution:
         late = watchdog.late(now, self.moving)
         if late is not None:
             module, client = late
-            log.warning("watchdog expired: %s, commanding %s, silent for %.2f s (its timeout "
-                        "%.3g s); stopping every module", client.peer, module,
-                        now - client.last_heard, watchdog.timeout_of(client))
+            log.warning("watchdog expired: %s silent for %.2f s (its timeout %.3g s) while "
+                        "commanding %s; stopping every module", client.peer,
+                        now - client.last_heard, watchdog.timeout_of(client), module)
             self._stop_keep_trip("watchdog expired")
             watchdog.trip("expired", now)
 
@@ -301,8 +301,8 @@ class RobotDistribution:
             self._control_changed(client, now)
         lost = self.watchdog.client_lost(client, self.moving)
         if lost:
-            log.warning("watchdog tripped: %s, commanding %s, disconnected; stopping every "
-                        "module", client.peer, " ".join(lost))
+            log.warning("watchdog tripped: commanding client %s disconnected (it commanded "
+                        "%s); stopping every module", client.peer, " ".join(lost))
             self._stop_keep_trip("commanding client lost")
             self.watchdog.trip("commander lost", now)
 
