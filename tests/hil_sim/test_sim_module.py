@@ -255,3 +255,14 @@ def test_unplug_a_can_bus_silences_the_odrives_until_plugged() -> None:
         assert c.ask("base:base.drive=(30,0)") == ""
     finally:
         h.close()
+
+
+def test_sim_is_a_reserved_module_name() -> None:
+    from ramp.config import parse_config
+
+    text = "buses:\n  io: {driver: sim}\nmodules:\n  sim: {type: demo, motor: {bus: io}, " \
+           "lamp: {bus: io}}\n"
+    _, errors = parse_config(text, "robot.yaml")
+    assert [str(e) for e in errors] == [
+        "robot.yaml:4: modules.sim: `sim` is reserved for the simulator's fault injection "
+        "(SPEC 12, under --sim)"]
