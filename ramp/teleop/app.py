@@ -23,17 +23,16 @@ from starlette.requests import Request
 from starlette.responses import FileResponse, Response
 from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
-from starlette.websockets import WebSocket, WebSocketDisconnect
+from starlette.websockets import WebSocket
 
 from ramp.teleop.console import Console
+from ramp.teleop.pagereader import PageReader
 
 log = logging.getLogger("ramp.teleop")
 
 #: Messages waiting for a slow page; past this, status updates are dropped (the next one
 #: replaces them anyway), never the page's own answers.
 _QUEUE = 256
-#: Largest message a page may send; inputs are a few hundred bytes.
-_MAX_MESSAGE = 16384
 LOCAL_HOSTS = ["127.0.0.1", "localhost", "[::1]"]
 
 
@@ -83,19 +82,11 @@ def create_app(console: Console) -> Starlette:
         sock = _PageSocket(ws)
         page = console.open_page(sock.post)
         writer = asyncio.create_task(sock.write_loop())
+        reader = PageReader(console, page)
         try:
-            while True:
-                text = await ws.receive_text()
-                if len(text) > _MAX_MESSAGE:
-                    continue
-                try:
-                    msg = json.loads(text)
-                except ValueError:
-                    continue
-                await console.page_message(page, msg)
-        except (WebSocketDisconnect, RuntimeError):
-            pass
+            await reader.read(ws)
         finally:
+            reader.close()
             console.close_page(page)
             writer.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):

@@ -22,6 +22,7 @@ from ramp.mcp.messages import Request, Response
 from ramp.mcp.protocol import format_requests, parse_message
 from ramp.mcp.session import Reply
 from ramp.teleop.controller import Controller, Message, module_stop
+from ramp.teleop.gate import PROBE, MotionGate
 from ramp.teleop.mapping import PadState, intent_of
 from ramp.teleop.profile import Profile, ProfileError, ProfileLibrary
 from ramp.teleop.robot import Link, Status, StatusPoller, catalog_view
@@ -33,6 +34,7 @@ CALL_TIMEOUT_S = 1.0
 STOP_ALL = "robot:robot.stop=()"
 _SPLIT_PARAMS = re.compile(r"[,\s]+")
 _MAX_KEYS = 16
+_DEVICE = re.compile(r"[A-Za-z0-9_]{1,32}:[A-Za-z0-9_]{1,32}\Z")
 
 Sink = Callable[[dict[str, Any]], None]
 
@@ -103,6 +105,7 @@ class Console:
         self.poller = StatusPoller(self.status_link, poll_hz, on_status=self._on_status,
                                    on_catalog=self._on_catalog)
         self.controller = Controller(stop_for=self._stop_for)
+        self.gate = MotionGate()
         self.pages: dict[str, Sink] = {}
         self._drive_views: dict[str, dict[str, object]] = {}
         self._next_page = 0
@@ -166,21 +169,27 @@ class Console:
                 "safety": {"stale_after": self.controller.stale_after,
                            "focus_grace": self.controller.focus_grace}}
 
-    async def page_message(self, page: str, msg: Any) -> None:
+    def page_input(self, page: str, msg: dict[str, Any], at: float | None = None) -> None:
+        """An input frame (pad, keys, focus) that arrived at loop time `at`: applied at once,
+        and the page's freshness is that arrival, not now."""
+        if page not in self.pages:
+            return
+        keys = [k for k in msg.get("keys", []) if isinstance(k, str)][:_MAX_KEYS] \
+            if isinstance(msg.get("keys"), list) else []
+        intent = intent_of(self.profile, pad_from_json(msg.get("pad")), keys)
+        self.controller.page_input(page, self.now() if at is None else at,
+                                   focused=bool(msg.get("focused", True)), intent=intent)
+        self._run_tick()
+
+    async def page_message(self, page: str, msg: Any, at: float | None = None) -> None:
         """One message from a page; malformed ones are answered with an event, never fatal."""
         if not isinstance(msg, dict) or page not in self.pages:
             return
         kind = msg.get("type")
-        now = self.now()
         if kind == "input":
-            keys = [k for k in msg.get("keys", []) if isinstance(k, str)][:_MAX_KEYS] \
-                if isinstance(msg.get("keys"), list) else []
-            intent = intent_of(self.profile, pad_from_json(msg.get("pad")), keys)
-            self.controller.page_input(page, now, focused=bool(msg.get("focused", True)),
-                                       intent=intent)
-            self._run_tick()
+            self.page_input(page, msg, at)
             return
-        self.controller.seen(page, now)
+        self.controller.seen(page, self.now() if at is None else at)
         if kind == "stop":
             await self.stop_all(page)
         elif kind == "call":
@@ -189,14 +198,21 @@ class Console:
             await self.control(page, str(msg.get("action", "")))
         elif kind == "profile":
             self.switch_profile(page, str(msg.get("name", "")))
+        elif kind == "reset":
+            await self.reset(page, str(msg.get("target", "")))
         else:
             self._post(page, {"type": "event", "level": "warning",
                               "text": f"unknown page message {kind!r}"})
 
+    def busy(self, page: str, msg: dict[str, Any]) -> None:
+        """Too many of the page's calls wait for answers: this one is not sent."""
+        self._post(page, {"type": "result", "id": msg.get("id"), "ok": False,
+                          "text": "busy: too many calls waiting for the robot; not sent"})
+
     # -- operator actions -----------------------------------------------------------------------
     async def stop_all(self, page: str) -> None:
         """The big STOP: `robot:robot.stop=()` on whichever link is up, and latch."""
-        self.controller.interrupted(self.now(), "STOP pressed")
+        self._interrupted("STOP pressed")
         future = self.command_link.submit(STOP_ALL) or self.status_link.submit(STOP_ALL)
         if future is None:
             self._post(page, {"type": "result", "id": "stop", "ok": False,
@@ -227,13 +243,13 @@ class Console:
         if (request.module, request.device, request.function) == \
                 ("robot", "control", "acquire") and not refused:
             self.want_control = True
-            self.controller.interrupted(self.now(), "control taken")
+            self._interrupted("control taken")
         elif (request.module, request.device, request.function) == \
                 ("robot", "control", "release") and not refused:
             self.want_control = False
         elif request.function == "stop" and not refused:
             if request.module == "robot":
-                self.controller.interrupted(self.now(), "robot stopped")
+                self._interrupted("robot stopped")
             else:
                 self.controller.forget([request.module])
         elif is_motion(request, self.poller.catalog) and not refused:
@@ -246,6 +262,14 @@ class Console:
         elif action == "release":
             await self.call(page, {"id": "control", "target": "robot:control.release",
                                    "params": ""})
+
+    async def reset(self, page: str, target: str) -> None:
+        """An alert's Reset: `MODULE:DEVICE.reset=()`, acknowledging a latched fault."""
+        if not _DEVICE.match(target):
+            self._post(page, {"type": "result", "id": "reset", "ok": False,
+                              "text": f"reset: {target!r} is not MODULE:DEVICE"})
+            return
+        await self.call(page, {"id": "reset", "target": f"{target}.reset", "params": ""})
 
     def switch_profile(self, page: str, name: str) -> None:
         try:
@@ -266,7 +290,14 @@ class Console:
             return module_stop(module)
         return Request("robot", "robot", "stop")
 
+    def _interrupted(self, reason: str) -> None:
+        """The robot was stopped: nothing held goes out, driving latches until re-pressed."""
+        self.gate.cancel()
+        self.controller.interrupted(self.now(), reason)
+
     def _command_link_changed(self, up: bool, detail: str) -> None:
+        if not up:
+            self.gate.cancel()
         self.controller.set_link(up, self.now())
         self._broadcast({"type": "event", "level": "info" if up else "error",
                          "text": f"command link {'up' if up else 'lost'}: {detail}"})
@@ -289,7 +320,7 @@ class Console:
             fresh = status.sent_at is not None and \
                 status.sent_at > self.controller.last_motion_at + 0.05
             if fresh:
-                self.controller.interrupted(self.now(), "watchdog tripped")
+                self._interrupted("watchdog tripped")
         self._watchdog_state = state
         self._broadcast(self.status_message(status))
         self._push_drive_views()
@@ -321,11 +352,37 @@ class Console:
 
     def _send(self, messages: list[Message]) -> None:
         for message in messages:
-            future = self.command_link.submit(message)
-            if future is None:
-                continue
-            if message:
-                future.add_done_callback(functools.partial(self._check_motion_reply, message))
+            now_message, probe = self.gate.offer(message)
+            if probe:
+                future = self.command_link.submit(PROBE)
+                if future is None:
+                    self.gate.answered(None)
+                else:
+                    future.add_done_callback(self._probed)
+            if now_message is not None:
+                self._submit(now_message)
+
+    def _submit(self, message: Message) -> None:
+        future = self.command_link.submit(message)
+        if future is not None and message:
+            future.add_done_callback(functools.partial(self._check_motion_reply, message))
+
+    def _probed(self, future: asyncio.Future[Reply[Any]]) -> None:
+        """The check before held motion: send it, or latch when someone stopped us."""
+        rows = None
+        if not future.cancelled() and future.exception() is None:
+            with contextlib.suppress(Exception):
+                rows = future.result().responses()
+        held, why = self.gate.answered(rows)
+        if held is not None:
+            self._submit(held)
+            return
+        if why and rows is not None:
+            self.controller.interrupted(self.now(), why)
+            self._broadcast({"type": "event", "level": "warning",
+                             "text": f"driving latched: {why}; release the dead-man and "
+                                     "press it again to drive"})
+            self._push_drive_views()
 
     def _check_motion_reply(self, message: Message, future: asyncio.Future[Reply[Any]]) -> None:
         if future.cancelled() or future.exception() is not None:

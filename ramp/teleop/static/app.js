@@ -51,7 +51,8 @@
   function nowText() { return new Date().toLocaleTimeString(); }
   function event(level, text) {
     const list = $("events");
-    list.prepend(el("li", { class: level }, el("time", { text: nowText() }), text));
+    // Entries carry "ev-LEVEL", never a bare level: "stop" is the big STOP button's class.
+    list.prepend(el("li", { class: `ev-${level}`, "data-testid": "event" }, el("time", { text: nowText() }), text));
     while (list.children.length > 60) list.lastChild.remove();
   }
 
