@@ -11,7 +11,6 @@ import asyncio
 import logging
 import re
 import signal
-import socket
 import sys
 from collections.abc import Sequence
 
@@ -101,8 +100,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"ramp-teleop: {exc.name} is missing; install the console's extra: "
               "pip install 'ramp[teleop]'", file=sys.stderr)
         return EXIT_USAGE
+    from ramp.teleop.listen import listen, raise_fd_limit
+
+    raise_fd_limit()
     try:
-        sock = socket.create_server((HTTP_HOST, args.http_port))
+        sock = listen(HTTP_HOST, args.http_port)
     except OSError as exc:
         print(f"ramp-teleop: cannot serve on {HTTP_HOST}:{args.http_port}: {exc.strerror}",
               file=sys.stderr)
