@@ -48,7 +48,7 @@ class SheddingSocket(socket.socket):
         self.shedding = False
         self.refused = 0
 
-    def accept(self) -> tuple[socket.socket, object]:  # type: ignore[override]
+    def accept(self) -> tuple[socket.socket, object]:
         try:
             conn, addr = super().accept()
         except OSError as exc:
