@@ -21,6 +21,8 @@ from ramp.mcp.describe import READ_FUNCTIONS, Catalog, error_text
 from ramp.mcp.messages import Request, Response
 from ramp.mcp.protocol import format_requests, parse_message
 from ramp.mcp.session import Reply
+from ramp.teleop.alerts import AlertBook, Inputs, raised
+from ramp.teleop.autonomy import AutonomyLink
 from ramp.teleop.controller import Controller, Message, module_stop
 from ramp.teleop.gate import PROBE, MotionGate
 from ramp.teleop.mapping import PadState, intent_of
@@ -96,7 +98,8 @@ class Console:
 
     def __init__(self, host: str, port: int, *, name: str, library: ProfileLibrary,
                  profile: Profile, poll_hz: float = 10.0,
-                 battery: tuple[float, float] = (17.0, 21.0)) -> None:
+                 battery: tuple[float, float] = (17.0, 21.0),
+                 autonomy: tuple[str, int] | None = None) -> None:
         self.host, self.port, self.name = host, port, name
         self.library, self.profile = library, profile
         self.poll_hz, self.battery = poll_hz, battery
@@ -114,6 +117,13 @@ class Console:
         #: The operator took control and has not handed it back: re-taken after a reconnect.
         self.want_control = False
         self._watchdog_state = ""
+        #: The autonomy's live view (SPEC 7.1), when `--autonomy` names one.
+        self.autonomy = AutonomyLink(*autonomy, on_update=self._on_autonomy) \
+            if autonomy is not None else None
+        self.alerts = AlertBook()
+        self._bandwidth: dict[str, Any] = {}
+        self._counted: tuple[float, int, int] | None = None  # (time, mcp bytes, view bytes)
+        self._started_at = 0.0
 
     # -- lifecycle ------------------------------------------------------------------------------
     def now(self) -> float:
@@ -127,7 +137,11 @@ class Console:
             asyncio.create_task(self.command_link.run(), name="command link"),
             asyncio.create_task(self.poller.run(), name="status poller"),
             asyncio.create_task(self._tick_loop(), name="controller tick"),
+            asyncio.create_task(self._bandwidth_loop(), name="bandwidth"),
         ]
+        if self.autonomy is not None:
+            self._tasks.append(asyncio.create_task(self.autonomy.run(), name="autonomy view"))
+        self._started_at = self.now()
 
     async def stop(self) -> None:
         """Stop what this console moved, then close both links."""
@@ -143,6 +157,8 @@ class Console:
                 await task
         await self.command_link.close()
         await self.status_link.close()
+        if self.autonomy is not None:
+            await self.autonomy.close()
 
     # -- pages ----------------------------------------------------------------------------------
     def open_page(self, sink: Sink) -> str:
@@ -154,6 +170,14 @@ class Console:
         sink({"type": "catalog", "modules": catalog_view(self.poller.catalog,
                                                           self.poller.status.states)})
         sink(self.status_message(self.poller.status))
+        if self.autonomy is not None:
+            view = self.autonomy.view
+            sink({"type": "autonomy_map", "map": view.map})
+            sink({"type": "autonomy_scan", "points": view.scan})
+            sink(self.autonomy_message())
+        sink({"type": "alerts", "alerts": self.alerts.view()})
+        if self._bandwidth:
+            sink(self._bandwidth)
         return page
 
     def close_page(self, page: str) -> None:
@@ -166,6 +190,7 @@ class Console:
         return {"type": "hello", "name": self.name, "backend": f"{self.host}:{self.port}",
                 "poll_hz": self.poll_hz, "battery": list(self.battery),
                 "profiles": self.library.names(), "profile": self.profile.summary(),
+                "autonomy": self.autonomy.address if self.autonomy is not None else None,
                 "safety": {"stale_after": self.controller.stale_after,
                            "focus_grace": self.controller.focus_grace}}
 
@@ -324,6 +349,69 @@ class Console:
         self._watchdog_state = state
         self._broadcast(self.status_message(status))
         self._push_drive_views()
+        self._update_alerts()
+
+    # -- the autonomy's view, alerts, bandwidth -------------------------------------------------
+    def autonomy_message(self) -> dict[str, Any]:
+        assert self.autonomy is not None
+        return {"type": "autonomy", "address": self.autonomy.address,
+                **self.autonomy.view.summary(self.now())}
+
+    def _on_autonomy(self, kind: str) -> None:
+        assert self.autonomy is not None
+        view = self.autonomy.view
+        if kind == "/map":
+            self._broadcast({"type": "autonomy_map", "map": view.map})
+        elif kind == "/lidar/scan":
+            self._broadcast({"type": "autonomy_scan", "points": view.scan})
+        self._broadcast(self.autonomy_message())
+        self._update_alerts()
+
+    def _update_alerts(self) -> None:
+        status = self.poller.status
+        volts = tuple(f"{p.module}:{p.device}.{p.name}"
+                      for props in self.poller.catalog.properties.values() for p in props
+                      if p.unit == "V")
+        inputs = Inputs(robot_reachable=status.reachable or status.polls == 0,
+                        robot_detail=status.detail, values=status.values, states=status.states,
+                        errors=status.errors, batteries=volts, battery_range=self.battery,
+                        operator=self.name,
+                        autonomy=None if self.autonomy is None else
+                        self.autonomy.view.summary(self.now()))
+        if self.alerts.update(raised(inputs), self.now()):
+            self._broadcast({"type": "alerts", "alerts": self.alerts.view()})
+
+    async def _bandwidth_loop(self) -> None:
+        while True:
+            await asyncio.sleep(1.0)
+            try:
+                self._count_bandwidth()
+                if self.autonomy is not None:  # "stale" and "in state" move with time
+                    self._broadcast(self.autonomy_message())
+                    self._update_alerts()
+            except Exception:  # never end the loop that keeps the page's figures
+                log.exception("bandwidth count failed")
+
+    def link_bytes(self) -> tuple[int, int]:
+        """Bytes both ways so far: (MCP, both links; the autonomy's view)."""
+        mcp = self.status_link.bytes_total + self.command_link.bytes_total
+        view = 0 if self.autonomy is None else self.autonomy.bytes_in + self.autonomy.bytes_out
+        return mcp, view
+
+    def _count_bandwidth(self) -> None:
+        now = self.now()
+        mcp, view = self.link_bytes()
+        if self._counted is not None:
+            t0, mcp0, view0 = self._counted
+            dt = max(1e-3, now - t0)
+            elapsed = max(1e-3, now - self._started_at)
+            self._bandwidth = {"type": "bandwidth", "mcp_bps": round((mcp - mcp0) / dt),
+                               "view_bps": round((view - view0) / dt),
+                               "total_bps": round((mcp + view - mcp0 - view0) / dt),
+                               "average_bps": round((mcp + view) / elapsed),
+                               "autonomy": self.autonomy is not None}
+            self._broadcast(self._bandwidth)
+        self._counted = (now, mcp, view)
 
     def _on_catalog(self, catalog: Catalog) -> None:
         self._broadcast({"type": "catalog",
