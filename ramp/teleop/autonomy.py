@@ -229,7 +229,6 @@ class AutonomyLink:
         by_topic: dict[str, int] = {}        # topic -> our subscription id
         next_sub = iter(range(1, 1 << 31))
         due: dict[str, float] = {}           # sampled topic -> loop time of its next take
-        taken: set[str] = set()
         loop = asyncio.get_running_loop()
         periods = {POSE: self.pose_period, TRUE_POSE: self.pose_period,
                    NUMBERS: self.pose_period, SCAN: self.scan_period}
@@ -261,9 +260,6 @@ class AutonomyLink:
         async def sampler() -> None:
             while True:
                 now = loop.time()
-                done = [t for t in taken if t in by_topic]
-                taken.clear()
-                await unsubscribe(done)
                 start = [t for t in periods if t in channels.values() and t not in by_topic
                          and now >= due.get(t, 0.0)]
                 for t in start:
@@ -296,7 +292,9 @@ class AutonomyLink:
                 if topic is None:
                     continue  # sent before our unsubscribe arrived
                 if topic in periods:
-                    taken.add(topic)
+                    # Got the one we wanted: say so at once, not at the sampler's next turn
+                    # (scans come several a second while the autonomy looks around).
+                    await unsubscribe([topic])
                 self.view.last_message = now
                 try:
                     payload = json.loads(bytes(message[_HEADER.size:]))
