@@ -132,11 +132,15 @@ def _autonomy(a: dict[str, Any], owner: str, operator: str) -> list[Alert]:
                          f"{reason or 'the autonomy gave up'}. Take control, drive or fix "
                          "what is wrong, then Hand back: the mission re-localizes and "
                          "resumes."))
-    elif state in RECOVERY or (state == "stop" and "lost" in reason):
+    elif a.get("lost") and state in RECOVERY + ("stop", "resume"):
         out.append(Alert("localization", "error", "Localization lost",
                          f"The autonomy stopped and is recovering ({state}"
                          f"{': ' + reason if reason else ''}). If it does not find itself "
                          "again, take control and drive it where the walls are in view."))
+    elif state in RECOVERY:
+        out.append(Alert("localization", "info", "Re-localizing",
+                         f"The autonomy is finding its pose again ({state}) before it goes "
+                         "on; it does not drive meanwhile."))
     elif isinstance(confidence, int | float) and confidence < CONFIDENCE_LOW \
             and state not in BEFORE_FIX and state != "paused":
         out.append(Alert("confidence", "warning", "Localization confidence low",

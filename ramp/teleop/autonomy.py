@@ -38,6 +38,9 @@ STATE, MAP = "/mission/state", "/map"
 POSE, TRUE_POSE, NUMBERS, SCAN = "/pose/estimated", "/pose/true", "/mission/numbers", \
     "/lidar/scan"
 ALWAYS = (STATE, MAP)
+#: States a lost mission passes through before it is found again (or gives up).
+LOST_STATES = ("stop", "relevel", "rescan", "relocalize", "resume", "waiting_for_operator",
+               "paused")
 POSE_PERIOD_S = 0.5
 SCAN_PERIOD_S = 2.0
 RETRY_S = 1.0
@@ -60,6 +63,9 @@ class ViewState:
     reason: str = ""
     #: Loop time at which the mission entered `state` (from the message's stamp).
     state_since: float | None = None
+    #: The mission lost its localization and has not found it again (a re-localization
+    #: after a hand-back passes through the same states without being lost).
+    lost: bool = False
     numbers: dict[str, Any] = field(default_factory=dict)
     pose: tuple[float, float, float] | None = None
     true_pose: tuple[float, float, float] | None = None
@@ -80,7 +86,7 @@ class ViewState:
         return {
             "connected": self.connected, "detail": self.detail, "stale": self.stale(now),
             "state": self.state, "previous": self.previous, "trigger": self.trigger,
-            "reason": self.reason,
+            "reason": self.reason, "lost": self.lost,
             "in_state_s": None if self.state_since is None else round(now - self.state_since,
                                                                       1),
             "numbers": self.numbers, "pose": self.pose, "true_pose": self.true_pose,
@@ -311,6 +317,10 @@ class AutonomyLink:
         if topic == STATE:
             v.state, v.previous = str(msg.get("state", "")), str(msg.get("from", ""))
             v.trigger, v.reason = str(msg.get("trigger", "")), str(msg.get("reason", ""))
+            if v.trigger == "lost" or v.reason.startswith("lost"):
+                v.lost = True
+            elif v.state not in LOST_STATES:
+                v.lost = False
             age = (time.time_ns() - stamp_ns) / 1e9
             v.state_since = now - age if 0 <= age < 86_400 else now
         elif topic == NUMBERS:

@@ -145,6 +145,11 @@ def test_the_operator_sees_the_mission_and_takes_over_from_an_error_alert_then_h
             # Past the first fix: the autonomy knows where it is and says so.
             wait_for(lambda: float(page.get_by_test_id("autonomy-confidence").text_content()
                                    or 0) > 0.5, 60, "a localization fix")
+            if os.environ.get("RAMP_UPDATE_DOCS") == "1":
+                # The docs' picture: with the obstacles detected and the plan on the map.
+                expect(page.get_by_test_id("autonomy-state")).to_contain_text(
+                    "cross_to_dig", timeout=120_000)
+                time.sleep(3)
             # Blind the LIDAR. sim requests are owner-only while the autonomy owns control,
             # so as a trainer would: take control, blind, hand back in one message.
             assert mcp.request("robot:control.acquire=(trainer)sim:lidar.blind=(1)"

@@ -44,9 +44,11 @@ def test_a_lost_robot_link_is_an_error() -> None:
 
 
 def test_the_autonomy_lost_waiting_or_unsure_raises_its_alerts() -> None:
-    assert ids(Inputs(autonomy=view(state="relocalize"))) == {"localization": "error"}
-    assert ids(Inputs(autonomy=view(state="stop", reason="lost: too few returns"))) == {
+    assert ids(Inputs(autonomy=view(state="relocalize", lost=True))) == {
         "localization": "error"}
+    assert ids(Inputs(autonomy=view(state="stop", lost=True))) == {"localization": "error"}
+    # Re-localizing after a hand-back is not being lost.
+    assert ids(Inputs(autonomy=view(state="relevel", lost=False))) == {"localization": "info"}
     waiting = raised(Inputs(autonomy=view(state="waiting_for_operator",
                                           reason="still lost after 3 relocalization tries")))
     assert [(a.id, a.severity) for a in waiting] == [("mission-waiting", "error")]

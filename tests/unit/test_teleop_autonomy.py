@@ -99,3 +99,17 @@ def test_it_takes_poses_at_its_own_rate_and_state_and_map_as_they_change() -> No
     assert 2 <= got["/mission/numbers"] <= 6, got
     assert got["/mission/state"] == 1 and got["/map"] == 1
     assert link.bytes_in > 0 and link.bytes_out > 0
+
+
+def test_lost_holds_from_a_lost_stop_until_a_working_state() -> None:
+    link = AutonomyLink("127.0.0.1", 9)
+    for state, trigger, reason, lost in (
+            ("relevel", "finished", "control acquired as autonomy", False),
+            ("stop", "lost", "too few returns to localize", True),
+            ("relevel", "finished", "standing still", True),
+            ("relocalize", "finished", "10 level scans", True),
+            ("resume", "finished", "localized", True),
+            ("cross_to_dig", "dispatch", "resume cross_to_dig", False)):
+        link._take("/mission/state", {"state": state, "from": "", "trigger": trigger,
+                                      "reason": reason}, 0, 0.0)
+        assert link.view.lost is lost, state
