@@ -482,6 +482,7 @@ class Console:
         refused = refused_modules(message, rows)
         if refused:
             self.controller.forget(refused)
+            self.gate.forget(refused)
             errors = "; ".join(f"{r.module}:{r.device} {error_text(r)}" for r in rows
                                if r.prop == "error")
             self._broadcast({"type": "event", "level": "error",

@@ -103,6 +103,13 @@ class MotionGate:
             else:
                 self.targets[(r.module, r.device, r.function)] = moves(r)
 
+    def forget(self, modules: set[str]) -> None:
+        """The robot refused our motion there (not_owner, fault, interlocked): it never
+        moved, so a stop seen later is not a stop of ours."""
+        for key in self.targets:
+            if key[0] in modules:
+                self.targets[key] = False
+
     def answered(self, rows: list[Response] | None) -> tuple[Message | None, str]:
         """The probe's answer (None: it failed): (the held message to send now, or why it
         is dropped)."""

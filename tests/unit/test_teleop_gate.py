@@ -50,3 +50,10 @@ def test_motion_back_to_rest_needs_no_check_afterwards() -> None:
     assert not gate.moving  # a stick at rest: the robot's idle watchdog is ours
     assert gate.offer(DRIVE) == (DRIVE, False)
     assert gate.offer([]) == ([], False)  # heartbeats always go
+
+
+def test_motion_the_robot_refused_is_not_ours_to_guard() -> None:
+    gate = MotionGate()
+    gate.offer(DRIVE)  # answered not_owner: the autonomy owns control
+    gate.forget({"base"})
+    assert gate.offer(DRIVE2) == (DRIVE2, False)  # no check, no false latch
