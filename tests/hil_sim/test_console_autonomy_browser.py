@@ -127,6 +127,7 @@ def wait_for(check: Callable[[], bool], timeout: float, what: str) -> None:
         time.sleep(0.1)
 
 
+@pytest.mark.timeout(240)  # ~20 s; `make screenshots` waits for the crossing (a minute more)
 def test_the_operator_sees_the_mission_and_takes_over_from_an_error_alert_then_hands_back(
         mission: tuple[str, str], browser: Any) -> None:
     backend, view = mission
