@@ -21,6 +21,7 @@ import asyncio
 import contextlib
 import json
 import logging
+import re
 from collections import deque
 from typing import Any
 
@@ -35,6 +36,8 @@ MAX_MESSAGE = 16384
 #: Calls of one page waiting for their answers at once; more are answered "busy".
 MAX_PENDING = 32
 CLOSE_UNSUPPORTED_DATA = 1003
+#: How the page writes an input frame (JSON.stringify: `{"type":"input",...`), spaces allowed.
+_INPUT = re.compile(r'\{\s*"type"\s*:\s*"input"')
 
 
 class PageReader:
@@ -43,7 +46,7 @@ class PageReader:
     def __init__(self, console: Console, page: str) -> None:
         self.console = console
         self.page = page
-        self.inbox: deque[tuple[float, dict[str, Any]]] = deque()
+        self.inbox: deque[tuple[float, str]] = deque()
         self.wake = asyncio.Event()
         self.pending: set[asyncio.Task[None]] = set()
         self.dispatcher = asyncio.create_task(self._dispatch())
@@ -51,13 +54,26 @@ class PageReader:
         self.collapsed = 0
 
     async def read(self, ws: WebSocket) -> None:
-        """Read until the page's socket ends; each message stamped with its arrival."""
+        """Read until the page's socket ends; each message stamped with its arrival.
+
+        A frame is queued by the server's protocol when its bytes are read, which happens
+        only while this loop runs other work. So while this reader takes messages without
+        waiting, each was queued before it last waited: its arrival is at most the time of
+        that wake-up, however long the run of reads takes. Reading is kept cheap anyway
+        (no JSON here)."""
         loop = asyncio.get_running_loop()
+        arrived = loop.time()
         while True:
+            waited = [False]
+            probe = loop.call_soon(waited.__setitem__, 0, True)
             try:
                 message = await ws.receive()
             except (RuntimeError, OSError):
                 return
+            if waited[0]:
+                arrived = loop.time()  # the loop ran: this one was read in just now
+            else:
+                probe.cancel()
             if message.get("type") == "websocket.disconnect":
                 return
             if message.get("bytes") is not None:
@@ -69,13 +85,8 @@ class PageReader:
             text = message.get("text")
             if not isinstance(text, str) or len(text) > MAX_MESSAGE:
                 continue
-            try:
-                msg = json.loads(text)
-            except ValueError:
-                continue
-            if isinstance(msg, dict):
-                self.inbox.append((loop.time(), msg))
-                self.wake.set()
+            self.inbox.append((arrived, text))
+            self.wake.set()
 
     def close(self) -> None:
         self.dispatcher.cancel()
@@ -88,13 +99,21 @@ class PageReader:
             self.wake.clear()
             batch = list(self.inbox)
             self.inbox.clear()
-            last_input = max((i for i, (_, m) in enumerate(batch) if m.get("type") == "input"),
-                             default=-1)
-            for i, (at, msg) in enumerate(batch):
+            # The page writes input frames as {"type":"input",...}: only the newest of a
+            # backlog is parsed and applied; every other message is parsed and run in order.
+            last_input = max((i for i, (_, text) in enumerate(batch)
+                              if _INPUT.match(text)), default=-1)
+            for i, (at, text) in enumerate(batch):
+                if _INPUT.match(text) and i != last_input:
+                    self.collapsed += 1
+                    continue
+                try:
+                    msg = json.loads(text)
+                except ValueError:
+                    continue
+                if not isinstance(msg, dict):
+                    continue
                 if msg.get("type") == "input":
-                    if i != last_input:
-                        self.collapsed += 1
-                        continue
                     try:
                         self.console.page_input(self.page, msg, at)
                     except Exception:  # one bad frame must not end the page's dispatcher

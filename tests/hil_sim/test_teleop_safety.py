@@ -13,6 +13,7 @@ the old console:
 from __future__ import annotations
 
 import asyncio
+import json
 import os
 import signal
 import subprocess
@@ -136,7 +137,8 @@ async def burst_then_silence(robot: tuple[subprocess.Popen[str], str, int]) -> f
         assert all(v > 0 for v in await wheel_speeds(watcher))
         loop = asyncio.get_running_loop()
         # 3,000 frames arrive at once (a page that froze and flushed its buffer), then none.
-        frames = [(loop.time(), pad_frame(0.8 + 0.001 * (i % 7), True)) for i in range(3000)]
+        frames = [(loop.time(), json.dumps(pad_frame(0.8 + 0.001 * (i % 7), True),
+                                           separators=(",", ":"))) for i in range(3000)]
         last = loop.time()
         reader.inbox.extend(frames)
         reader.wake.set()
@@ -159,3 +161,51 @@ def test_a_page_that_bursts_frames_then_falls_silent_stops_within_0_3_s_of_its_l
     took = asyncio.run(burst_then_silence(robot))
     # 0.3 s of staleness, then the console's 50 ms tick and the robot's answer.
     assert took < 0.45, f"still moving {took:.2f} s after the last frame arrived"
+
+
+def test_through_the_real_socket_a_burst_then_silence_stops_within_0_3_s_of_the_last_frame(
+        robot: tuple[subprocess.Popen[str], str, int]) -> None:
+    """The black-box finding as it was made: `ramp-teleop` as a process, a page's WebSocket
+    that drives, then sends 3,000 frames at once and falls silent (it kept moving 1.6-1.85 s)."""
+    import re
+    import sys
+    import time
+
+    from websockets.sync.client import connect
+
+    from ramp.mcp.client import McpClient
+
+    _, host, port = robot
+    teleop = subprocess.Popen(
+        [sys.executable, "-m", "ramp.teleop", "--backend", f"{host}:{port}", "--http-port", "0"],
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        assert teleop.stdout is not None
+        m = re.search(r"http://(127\.0\.0\.1:\d+)/", teleop.stdout.readline())
+        assert m
+        with connect(f"ws://{m.group(1)}/ws", open_timeout=5) as ws, \
+                McpClient(host, port, timeout=5.0) as mcp:
+            def moving() -> bool:
+                rows = mcp.request("base:base.get=()")
+                return any(r.prop == "vel" and r.values[0] != 0 for r in rows)
+
+            deadline = time.monotonic() + 5
+            while not moving():
+                ws.send(json.dumps(pad_frame(0.8, True)))
+                time.sleep(0.05)
+                assert time.monotonic() < deadline, "never drove"
+            burst = "".join(json.dumps(pad_frame(0.8 + 0.001 * (i % 7), True))
+                            for i in range(1))  # one frame's text, sent 3,000 times
+            for _ in range(3000):
+                ws.send(burst)
+            last = time.monotonic()
+            while moving():
+                time.sleep(0.01)
+                assert time.monotonic() - last < 3.0
+            took = time.monotonic() - last
+        assert took < 0.45, f"still moving {took:.2f} s after the last frame was sent"
+    finally:
+        teleop.terminate()
+        teleop.wait(timeout=10)
+        if teleop.stdout is not None:
+            teleop.stdout.close()

@@ -74,7 +74,8 @@ def test_a_backlog_of_input_frames_is_applied_once_with_the_newest_arrival_time(
         console = FakeConsole()
         reader = PageReader(console, "1")  # type: ignore[arg-type]
         for i in range(500):
-            reader.inbox.append((float(i), {"type": "input", "n": i}))
+            reader.inbox.append((float(i), json.dumps({"type": "input", "n": i},
+                                                      separators=(",", ":"))))
         reader.wake.set()
         await asyncio.sleep(0.01)
         reader.close()
