@@ -86,14 +86,24 @@ async def jitter(console: Console, page: str, seconds: float, *, lb: bool = True
         await asyncio.sleep(0.05)
 
 
+async def jitter_until_driving(console: Console, page: str, watcher: AsyncMcpClient,
+                               timeout: float = 5.0) -> list[int]:
+    """Jitter with LB held until all four wheels turn (or `timeout`); their speeds."""
+    end = asyncio.get_running_loop().time() + timeout
+    while True:
+        await jitter(console, page, 0.2)
+        speeds = await wheel_speeds(watcher)
+        if all(v > 0 for v in speeds) or asyncio.get_running_loop().time() > end:
+            return speeds
+
+
 async def drive_then_stopped_by(robot: tuple[subprocess.Popen[str], str, int], how: str
                                 ) -> tuple[list[int], list[list[int]], list[int]]:
     proc, host, port = robot
     console, page = await console_for(host, port)
     watcher = await AsyncMcpClient.connect(host, port, timeout=2.0)
     try:
-        await jitter(console, page, 0.5)
-        driving = await wheel_speeds(watcher)
+        driving = await jitter_until_driving(console, page, watcher)
         if how == "another client":
             await watcher.request("robot:robot.stop=()", 2.0)
         else:  # a 0.6 s supervisor stall
@@ -105,8 +115,7 @@ async def drive_then_stopped_by(robot: tuple[subprocess.Popen[str], str, int], h
             await jitter(console, page, 0.15)
             after.append(await wheel_speeds(watcher))
         await jitter(console, page, 0.2, lb=False)  # released ...
-        await jitter(console, page, 0.4)            # ... and pressed again
-        again = await wheel_speeds(watcher)
+        again = await jitter_until_driving(console, page, watcher)  # ... and pressed again
         await jitter(console, page, 0.2, lb=False)
         return driving, after, again
     finally:
@@ -133,8 +142,7 @@ async def burst_then_silence(robot: tuple[subprocess.Popen[str], str, int]) -> f
     watcher = await AsyncMcpClient.connect(host, port, timeout=2.0)
     reader = PageReader(console, page)
     try:
-        await jitter(console, page, 0.3)
-        assert all(v > 0 for v in await wheel_speeds(watcher))
+        assert all(v > 0 for v in await jitter_until_driving(console, page, watcher))
         loop = asyncio.get_running_loop()
         # 3,000 frames arrive at once (a page that froze and flushed its buffer), then none.
         frames = [(loop.time(), json.dumps(pad_frame(0.8 + 0.001 * (i % 7), True),
