@@ -34,6 +34,9 @@ log = logging.getLogger("ramp.teleop")
 #: replaces them anyway), never the page's own answers.
 _QUEUE = 256
 LOCAL_HOSTS = ["127.0.0.1", "localhost", "[::1]"]
+#: Messages a newer one of the same kind replaces within a second: dropped for a slow page
+#: (the map and the alerts are sent only when they change, so they are kept).
+_REPLACED = frozenset({"status", "autonomy", "autonomy_scan", "bandwidth"})
 
 
 def static_dir() -> Path:
@@ -52,8 +55,8 @@ class _PageSocket:
         try:
             self.queue.put_nowait(text)
         except asyncio.QueueFull:
-            if message.get("type") == "status":
-                return  # stale status is worthless; the next poll brings a fresh one
+            if message.get("type") in _REPLACED:
+                return  # stale news is worthless; the next one comes soon
             with contextlib.suppress(asyncio.QueueEmpty):
                 self.queue.get_nowait()
             self.queue.put_nowait(text)
