@@ -370,8 +370,8 @@
       if (!msg.ok) event("error", `STOP: ${msg.text}`);
       return;
     }
-    if (msg.id === "control") {
-      event(msg.ok ? "info" : "error", `${msg.request}: ${msg.text}`);
+    if (msg.id === "control" || msg.id === "reset") {
+      event(msg.ok ? "info" : "error", `${msg.request || msg.id}: ${msg.text}`);
       return;
     }
     const resultEl = st.calls.get(msg.id);
