@@ -15,6 +15,11 @@ planned); the simulator's truth (`/pose/true`, `true_*` numbers) is added by the
 | `/lidar/scan` | `foxglove.LaserScan` | each scan the autonomy took, at the estimated pose |
 | `/map` | `foxglove.SceneUpdate` | when the map changes: walls, detected obstacles, the plan |
 
+`/map` holds two entities: `mission` (the walls, then the plan's legs; the detected rocks and
+craters as cylinders) and `arena` (the regions' borders and the collector, in the order its
+metadata `lines` names, with the robot's footprint and the arena's size in its metadata), so
+a viewer with no copy of the arena (the operator console) can draw it all.
+
 Frame `arena` (SPEC 6.1) throughout. `/map` and `/mission/state` change seldom: a live view
 keeps their last message for clients that connect later (`LATCHED`).
 
