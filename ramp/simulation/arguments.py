@@ -3,13 +3,13 @@
 A seed, a count or a time outside what a run can use is a usage error naming the option and
 what was expected (exit 2), not a traceback or a run that allocates until it fails: a seed
 is what numpy's generators take, a campaign's runs fit in memory and finish this year, a run's
-length is at most a day of simulated time, a cluster address parses.
+length is at most a day of simulated time (a cluster address is
+`ramp.simulation.campaign.check_cluster_address`'s, on the shared host:port parser).
 """
 
 from __future__ import annotations
 
 import math
-from urllib.parse import urlsplit
 
 MAX_SEED = 2**32 - 1  # numpy's SeedSequence takes any non-negative int; this bounds the text
 MAX_RUNS = 100_000  # a campaign's table and report are held in memory
@@ -44,21 +44,6 @@ def check_duration(duration: float) -> None:
     if not (math.isfinite(duration) and 0.0 < duration <= MAX_DURATION_S):
         raise ArgumentError(f"--duration: expected a positive number of seconds up to "
                             f"{MAX_DURATION_S:g}, got {duration:g}")
-
-
-def check_cluster(address: str | None) -> None:
-    """`tcp://HOST:PORT` with a port 1-65535 (IPv6 hosts in brackets)."""
-    if address is None:
-        return
-    expected = f"--cluster {address!r}: expected tcp://HOST:PORT"
-    try:
-        parts = urlsplit(address)
-        port = parts.port
-    except ValueError as exc:
-        raise ArgumentError(f"{expected} ({exc})") from exc
-    if parts.scheme != "tcp" or not parts.hostname or port is None or port == 0 \
-            or parts.path not in ("", "/") or parts.query or parts.fragment:
-        raise ArgumentError(expected)
 
 
 def check_yaw(yaw_deg: float, option: str) -> None:

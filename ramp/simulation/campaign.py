@@ -40,9 +40,9 @@ from dataclasses import dataclass
 from multiprocessing import get_context
 from typing import Any
 
+from ramp.common.hostport import parse_hostport
 from ramp.simulation.arguments import (
     ArgumentError,
-    check_cluster,
     check_duration,
     check_runs,
     check_seed,
@@ -274,6 +274,17 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     return p
 
 
+def check_cluster_address(address: str) -> None:
+    """`tcp://HOST:PORT` (the scheme Dask's scheduler prints); CampaignError says why not."""
+    scheme, sep, rest = address.partition("://")
+    if not sep or scheme not in ("tcp", "tls"):
+        raise CampaignError(f"--cluster {address!r}: expected tcp://HOST:PORT")
+    try:
+        parse_hostport(rest, example="10.0.0.5:8786")
+    except ValueError as exc:
+        raise CampaignError(f"--cluster {address!r}: {exc}") from None
+
+
 def main(args: argparse.Namespace) -> int:
     """Run the campaign the arguments describe; print the table or the JSON report."""
     try:
@@ -287,10 +298,11 @@ def main(args: argparse.Namespace) -> int:
             check_runs(args.runs)
             check_seed(args.seed, args.runs)
             check_workers(args.workers)
-            check_cluster(args.cluster)
             check_duration(args.duration)
         except ArgumentError as exc:
             raise CampaignError(str(exc)) from exc
+        if args.cluster is not None:
+            check_cluster_address(args.cluster)
         specs = plan_runs(args.runs, args.seed, args.fault, args.duration, args.mission,
                           args.randomize)
         load_mission(args.mission)  # fail here, not in every worker
