@@ -84,10 +84,14 @@ def axis_angle(axis: Vec3, angle: float) -> Mat3:
 
 
 def mat_mul(a: Mat3, b: Mat3) -> Mat3:
-    cols = tuple(zip(*b, strict=True))
+    """Written out (it runs several times a tick); `0.0 +` first keeps the exact sums (and
+    the sign of a zero) that `sum()` gave on the Python this project runs."""
+    (b00, b01, b02), (b10, b11, b12), (b20, b21, b22) = b
     return tuple(  # type: ignore[return-value]
-        tuple(sum(ai * bi for ai, bi in zip(row, col, strict=True)) for col in cols)
-        for row in a
+        (0.0 + r0 * b00 + r1 * b10 + r2 * b20,
+         0.0 + r0 * b01 + r1 * b11 + r2 * b21,
+         0.0 + r0 * b02 + r1 * b12 + r2 * b22)
+        for r0, r1, r2 in a
     )
 
 
