@@ -109,9 +109,10 @@ def transpose(a: Mat3) -> Mat3:
 
 def angle_between(u: Vec3, v: Vec3) -> float:
     """The angle in radians between two non-zero vectors."""
-    dot = sum(a * b for a, b in zip(u, v, strict=True))
-    nu = math.sqrt(sum(a * a for a in u))
-    nv = math.sqrt(sum(b * b for b in v))
+    (u0, u1, u2), (v0, v1, v2) = u, v  # written out as mat_mul, the same sums
+    dot = 0.0 + u0 * v0 + u1 * v1 + u2 * v2
+    nu = math.sqrt(0.0 + u0 * u0 + u1 * u1 + u2 * u2)
+    nv = math.sqrt(0.0 + v0 * v0 + v1 * v1 + v2 * v2)
     return math.acos(max(-1.0, min(1.0, dot / (nu * nv))))
 
 
