@@ -7,10 +7,13 @@ STAMP := $(VENV)/.installed
 
 .PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak clean
 
-$(STAMP): pyproject.toml
+# RAMP, then the example plugin Scout's arm comes from (SPEC 10: installed as a team installs
+# a plugin package; its entry points are what RAMP finds).
+$(STAMP): pyproject.toml examples/ramp-arm/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[dev]'
+	$(PY) -m pip install --quiet -e examples/ramp-arm
 	touch $(STAMP)
 
 run: $(STAMP)
@@ -37,7 +40,7 @@ campaign: $(STAMP)
 	$(VENV)/bin/ramp sim campaign --runs 40
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check ramp firmware_like tests bench
+	$(VENV)/bin/ruff check ramp firmware_like tests bench examples
 	$(VENV)/bin/mypy
 	$(VENV)/bin/lint-imports
 

@@ -37,7 +37,7 @@ import bisect
 import math
 import random
 from collections.abc import Iterable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from firmware_like.arena import (
     Layout,
@@ -695,3 +695,12 @@ class MarteWorld:
         if sigma <= 0.0:
             return 0.0
         return max(-3.0 * sigma, min(3.0 * sigma, self._rng.gauss(0.0, sigma)))
+
+
+def marte_part(ctx: Any, module: str, config: Any) -> MarteWorld:
+    """`ramp.emulators` entries `module.base` and `module.ble`: MARTE's Base and BLE are one
+    coupled model (the lift's current drains the battery the wheels run on, the bin dumps
+    where the chassis stands), so both modules share one `MarteWorld` part: the rig's seeded
+    one when it handed one in, an empty arena otherwise."""
+    world: MarteWorld = ctx.shared("marte", MarteWorld)
+    return world

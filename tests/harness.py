@@ -150,6 +150,7 @@ class Harness:
 
 REPO = __import__("pathlib").Path(__file__).resolve().parent.parent
 MARTE_YAML = (REPO / "ramp.yaml").read_text()
+SCOUT_YAML = (REPO / "examples" / "robots" / "scout.yaml").read_text()
 
 
 class SimHarness(Harness):
@@ -157,14 +158,17 @@ class SimHarness(Harness):
     (`ramp.simulation.backplane.SimBackplane`)."""
 
     def __init__(self, yaml_text: str = MARTE_YAML, wire_level: bool = True,
-                 seed: int = 0, recorder: Any = None) -> None:
+                 seed: int = 0, recorder: Any = None, marte: bool = True) -> None:
+        """`marte`: hand the backplane a seeded MARTE model (False: the world is what the
+        config's emulators build, as for Scout; `world` is then the composed world)."""
         from firmware_like.marte import MarteWorld
         from ramp.simulation.backplane import SimBackplane
 
         self.clock = VirtualClock()
         self.config = config_from(yaml_text.replace("port: 5577", "port: 0"))
-        self.world = MarteWorld(seed=seed)
-        self.backplane = SimBackplane(self.config, self.world, wire_level=wire_level)
+        world = MarteWorld(seed=seed) if marte else None
+        self.backplane = SimBackplane(self.config, world, wire_level=wire_level)
+        self.world = self.backplane.world
         self.sup = build(self.config, self.clock, self.backplane.bus_factory,
                          host="127.0.0.1", port=0, recorder=recorder)
         self.backplane.attach(self.sup)

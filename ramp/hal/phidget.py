@@ -183,6 +183,14 @@ class PhidgetBus(Bus):
             "channel": Field(int, lo=0, hi=3, what="a bridge input"),
             "gain": Field(int, 128, choices=BRIDGE_GAINS, what="a bridge gain"),
         },
+        # An RC servo on a Phidget servo controller (RCServo): degrees map linearly onto the
+        # pulse, `neutral_us` at 0 deg, `us_per_deg` per degree, negated when `reversed`.
+        "servo": {
+            "channel": Field(int, lo=0, hi=15, what="an RC servo channel"),
+            "neutral_us": Field(float, 1500.0, lo=500.0, hi=2500.0, what="a pulse width in us"),
+            "us_per_deg": Field(float, 10.0, lo=1.0, hi=50.0, what="microseconds per degree"),
+            "reversed": Field(bool, False),
+        },
     }
 
     def __init__(
