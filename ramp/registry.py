@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from typing import Any
 
 GROUPS = ("ramp.modules", "ramp.drivers", "ramp.emulators")
+_WHAT = {"ramp.modules": "module type", "ramp.drivers": "driver", "ramp.emulators": "emulator"}
 
 
 class RegistryError(ValueError):
@@ -73,7 +74,7 @@ class Registry:
         """The one entry for `name`; RegistryError when unknown or registered twice."""
         found = self._entries().get(name)
         if not found:
-            kind = self.group.split(".", 1)[1].rstrip("s")
+            kind = _WHAT.get(self.group, self.group)
             raise RegistryError(f"unknown {kind} {name!r} (expected one of: "
                                 f"{', '.join(self.names()) or 'none installed'})")
         if len(found) > 1:
