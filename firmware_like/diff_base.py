@@ -77,6 +77,14 @@ class DiffBaseChassis:
         self._device(name, ("battery",))
         return self.battery_offset + self.battery_scale * self.volts
 
+    def sensor_reading(self, name: str, quantity: float) -> float | bool:
+        """What input `name` reads when what it senses is `quantity` (the `sim` module's
+        input override): a bumper pressed (non-zero) or not, the battery at `quantity` V."""
+        device = self._device(name, ("bumper_left", "bumper_right", "battery"))
+        if device == "battery":
+            return self.battery_offset + self.battery_scale * quantity
+        return quantity != 0
+
     def place(self, x: float, y: float, heading_deg: float) -> None:
         """Teleport (tests): the bumpers read what touches there."""
         self.x, self.y, self.heading = x, y, math.radians(heading_deg)

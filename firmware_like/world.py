@@ -64,6 +64,8 @@ class World:
         self._owner: dict[str, Any] = {}
         self._unplugged: set[str] = set()
         self._own_revision = 0
+        #: Inputs the `sim` module holds at a value (`sim:input.set`): name -> quantity.
+        self.overrides: dict[str, float] = {}
         for part in parts or []:
             self.add(part)
 
@@ -96,15 +98,21 @@ class World:
         self._route("set_motor", name, duty)
 
     def read_analog(self, name: str) -> float:
+        if name in self.overrides:
+            return float(self._overridden(name))
         return float(self._route("read_analog", name))
 
     def read_digital(self, name: str) -> bool:
+        if name in self.overrides:
+            return bool(self._overridden(name))
         return bool(self._route("read_digital", name))
 
     def write_digital(self, name: str, on: bool) -> None:
         self._route("write_digital", name, on)
 
     def read_bridge(self, name: str) -> float:
+        if name in self.overrides:
+            return float(self._overridden(name))
         return float(self._route("read_bridge", name))
 
     def set_servo(self, name: str, target_deg: float | None, speed_dps: float) -> None:
@@ -122,6 +130,31 @@ class World:
     def revision(self) -> int:
         """Moves on whenever any part's readings may have changed."""
         return self._own_revision + sum(int(getattr(p, "revision", 0)) for p in self.parts)
+
+    # -- the `sim` module's hooks (SPEC 12) -------------------------------------------------
+    def set_input(self, name: str, quantity: float) -> None:
+        """Input `name` reads as if it sensed `quantity` until `clear_input`."""
+        self.overrides[name] = quantity
+        self._own_revision += 1
+
+    def clear_input(self, name: str) -> None:
+        if self.overrides.pop(name, None) is not None:
+            self._own_revision += 1
+
+    def _overridden(self, name: str) -> float | bool:
+        """An overridden input's reading: through its part's sensor model (`sensor_reading`:
+        a battery's rail volts become pin volts) where the part has one, else the value."""
+        quantity = self.overrides[name]
+        for part in self.parts:
+            reading = getattr(part, "sensor_reading", None)
+            if reading is None:
+                continue
+            try:
+                out: float | bool = reading(name, quantity)
+            except KeyError:
+                continue
+            return out
+        return quantity
 
     # -- controls ---------------------------------------------------------------------------
     def unplug(self, bus: str) -> None:

@@ -158,7 +158,8 @@ class SimHarness(Harness):
     (`ramp.simulation.backplane.SimBackplane`)."""
 
     def __init__(self, yaml_text: str = MARTE_YAML, wire_level: bool = True,
-                 seed: int = 0, recorder: Any = None, marte: bool = True) -> None:
+                 seed: int = 0, recorder: Any = None, observer: Any = None,
+                 marte: bool = True) -> None:
         """`marte`: hand the backplane a seeded MARTE model (False: the world is what the
         config's emulators build, as for Scout; `world` is then the composed world)."""
         from firmware_like.marte import MarteWorld
@@ -170,7 +171,7 @@ class SimHarness(Harness):
         self.backplane = SimBackplane(self.config, world, wire_level=wire_level)
         self.world = self.backplane.world
         self.sup = build(self.config, self.clock, self.backplane.bus_factory,
-                         host="127.0.0.1", port=0, recorder=recorder)
+                         host="127.0.0.1", port=0, recorder=recorder, observer=observer)
         self.backplane.attach(self.sup)
         self.sup.start()
         self.sup.settle()

@@ -89,6 +89,9 @@ class SimBackplane:
         self.emulated: dict[str, Any] = {}
         self.odrive = self.emulated  # the name the tests of the CAN emulators use
         self._watched: dict[str, int] = {}
+        #: Buses the `sim` module has unplugged.
+        self.unplugged: set[str] = set()
+        self.sim_module: Any = None  # the `sim` module, made by `attach`
         self._shared: dict[str, Any] = {}
         if world is not None:
             self._shared["marte"] = world
@@ -149,10 +152,41 @@ class SimBackplane:
 
     def attach(self, sup: Supervisor) -> None:
         """Step the world (and service emulators) first in every tick; emulators behind a pty
-        also read in the scheduler's I/O wait, so bytes are stamped when they arrive."""
+        also read in the scheduler's I/O wait, so bytes are stamped when they arrive. The
+        `sim` module (SPEC 12) joins the robot's requests."""
+        from ramp.simulation.sim_module import SimModule
+
         self._scheduler = sup.scheduler
         self._clock = sup.clock
         sup.scheduler.add_task("sim.world", sup.scheduler.rate_hz, self.tick)
+        self.sim_module = SimModule(self)
+        sup.robot.add_extra(self.sim_module)
+
+    # -- the `sim` module's hooks (SPEC 12) ---------------------------------------------------
+    def unplug(self, bus: str) -> None:
+        """The bus's emulated device vanishes the way real hardware does: a device behind a
+        pty has its pty closed (the driver sees the cable pulled), an emulator with `silence`
+        (the ODrive axes) falls silent on its bus, a HAL-level sim board reports itself gone.
+        The real hot-plug path notices."""
+        if bus in self.sabertooth:
+            self.sabertooth[bus].link.unplug()
+        elif hasattr(self.emulated.get(bus), "silence"):
+            self.emulated[bus].silence()
+        else:
+            self.signals.unplug(bus)
+        self.unplugged.add(bus)
+
+    def plug(self, bus: str) -> None:
+        """The device comes back; the driver's retry (hot plug) finds it again."""
+        if bus in self.sabertooth:
+            link = self.sabertooth[bus].link
+            if not link.plugged:
+                link.replug()
+        elif hasattr(self.emulated.get(bus), "resume"):
+            self.emulated[bus].resume()
+        else:
+            self.signals.replug(bus)
+        self.unplugged.discard(bus)
 
     def tick(self, now: float, dt: float) -> None:
         self._watch_ptys()
