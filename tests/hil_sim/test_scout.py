@@ -117,3 +117,35 @@ def test_ramp_knows_no_arm() -> None:
     found = subprocess.run(["grep", "-ril", r"shoulder\|gripper", "ramp/"], cwd=REPO,
                            capture_output=True, text=True)
     assert found.stdout == ""
+
+
+def test_sim_input_set_presses_a_scout_bumper_through_its_sensor_model(
+        scout: SimHarness) -> None:
+    c = scout.connect()
+    assert c.ask("sim:input.set=(base,bumper_left,1)") == ""
+    assert c.ask("sim:input.set=(base,battery,10.5)") == ""
+    scout.advance(0.1)
+    base = rows(c.ask("base:base.get=()"))
+    assert base["base:bumper_left.press"] == "1" and base["base:bumper_right.press"] == "0"
+    scout.advance(12.0)  # the battery filter (2 s) settles
+    c.ask("")
+    assert float(rows(c.ask("base:base.get=()"))["base:battery.volt"]) == pytest.approx(
+        10.5, abs=0.05)
+    assert c.ask("sim:input.clear=(base,bumper_left)") == ""
+    scout.advance(0.1)
+    assert rows(c.ask("base:base.get=()"))["base:bumper_left.press"] == "0"
+
+
+def test_sim_bus_unplug_faults_scout_s_can_base_and_plug_brings_it_back(
+        scout: SimHarness) -> None:
+    c = scout.connect()
+    assert c.ask("sim:bus.unplug=(drive)") == ""
+    scout.advance(1.0)
+    c.ask("")
+    assert rows(c.ask("robot:robot.get=()"))["robot:base.state"] == "fault"
+    assert rows(c.ask("robot:robot.get=()"))["robot:arm.state"] == "ok"
+    assert c.ask("sim:bus.plug=(drive)") == ""
+    for _ in range(6):
+        scout.advance(0.5)
+        c.ask("")
+    assert rows(c.ask("robot:robot.get=()"))["robot:base.state"] == "ok"
