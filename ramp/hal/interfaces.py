@@ -372,6 +372,12 @@ class Bus(ABC):
         like Phidgets) every channel attached. Modules attach only on ready buses."""
         return self.is_open
 
+    def waiting(self) -> str:
+        """Why an open bus is not ready yet, once that is worth telling the operator (a board
+        that attaches asynchronously and is not plugged in); "" otherwise. The runtime logs
+        it once and says "back" only when the bus becomes ready."""
+        return ""
+
     def fileno(self) -> int | None:
         """A file descriptor the scheduler can wait on for input (or a hang-up), or None."""
         return None

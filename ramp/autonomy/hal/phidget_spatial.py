@@ -22,8 +22,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from ramp.autonomy.config import ImuConfig
-from ramp.autonomy.hal import phidget_common as pc
 from ramp.autonomy.hal.interfaces import Imu, ImuSample, Vec3
+from ramp.common import phidget22 as pc
 from ramp.errors import DeviceError
 
 log = logging.getLogger(__name__)

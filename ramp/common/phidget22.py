@@ -1,4 +1,5 @@
-"""What the autonomy's two Phidget22 drivers (Spatial, RCServo) share.
+"""The one Phidget22 adapter: what every driver on the vendor's package shares (the backend's
+`phidget` bus, the autonomy's Spatial IMU and RCServo gimbal).
 
 Phidget22 is callback-driven: libphidget22 attaches channels and delivers data on its own
 threads. Those threads must never touch the autonomy's state, so every handler does one thing,
@@ -21,7 +22,7 @@ from typing import Any
 
 from ramp.errors import DeviceError
 
-log = logging.getLogger("ramp.autonomy.hal.phidget")
+log = logging.getLogger("ramp.phidget22")
 
 INSTALL_HINT = "install it with: pip install 'ramp[phidget]' and apt-get install libusb-1.0-0"
 
@@ -116,3 +117,30 @@ def clamp_interval(ch: Any, ms: int, what: str) -> int:
     if clamped != ms:
         log.info("%s: data interval %d ms clamped to %d ms", what, ms, clamped)
     return clamped
+
+
+def set_servo_range(ch: Any, neutral_us: float, us_per_deg: float, lo: float, hi: float) -> None:
+    """Map an attached RCServo's positions onto pulses so that one position unit is one
+    degree (`neutral_us` at 0, `us_per_deg` per degree) between `lo` and `hi` (units, lo <
+    hi), and let the controller ramp its speed (velocity limit and acceleration apply)."""
+    ch.setMinPulseWidth(neutral_us + us_per_deg * lo)
+    ch.setMaxPulseWidth(neutral_us + us_per_deg * hi)
+    ch.setMinPosition(lo)
+    ch.setMaxPosition(hi)
+    ch.setSpeedRampingState(True)
+
+
+def send_target(ch: Any, units: float, on_done: Callable[[int], None]) -> bool:
+    """Hand an RCServo its target without waiting for the USB round trip when the library
+    can (`setTargetPosition_async`; `on_done(code)` then runs on a library thread: queue
+    only). False: it was set synchronously and is in place now."""
+    set_async = getattr(ch, "setTargetPosition_async", None)
+    if set_async is None:
+        ch.setTargetPosition(units)
+        return False
+
+    def done(_ch: Any, code: Any, _details: Any = "") -> None:
+        on_done(int(code))
+
+    set_async(units, done)
+    return True
