@@ -7,13 +7,14 @@ STAMP := $(VENV)/.installed
 
 .PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak clean
 
-# RAMP, then the example plugin Scout's arm comes from (SPEC 10: installed as a team installs
-# a plugin package; its entry points are what RAMP finds).
-$(STAMP): pyproject.toml examples/ramp-arm/pyproject.toml
+# RAMP, then the example plugins: Scout's arm, and the guides' winch (SPEC 10: installed as a
+# team installs a plugin package; their entry points are what RAMP finds).
+$(STAMP): pyproject.toml examples/ramp-arm/pyproject.toml examples/ramp-winch/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[dev]'
 	$(PY) -m pip install --quiet -e examples/ramp-arm
+	$(PY) -m pip install --quiet -e examples/ramp-winch
 	touch $(STAMP)
 
 run: $(STAMP)

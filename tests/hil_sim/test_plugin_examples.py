@@ -1,0 +1,72 @@
+"""The plugin packages in examples/ as a team uses them (SPEC 10): built as wheels, found
+through their entry points, run by `ramp run --sim` as a process and driven over MCP."""
+
+from __future__ import annotations
+
+import importlib.metadata as md
+import signal
+import socket
+import time
+from subprocess import Popen
+
+import pytest
+
+from tests.harness import ask_line, start_ramp
+
+PACKAGES = {"ramp-arm": ("arm",), "ramp-winch": ("winch",)}
+
+
+@pytest.mark.parametrize("package", sorted(PACKAGES))
+def test_each_example_package_is_installed_with_its_entry_points(package: str) -> None:
+    """`make` installs them with pip, as a team installs a plugin (pip install -e DIR)."""
+    dist = md.distribution(package)
+    groups = {ep.group for ep in dist.entry_points}
+    assert {"ramp.modules", "ramp.emulators"} <= groups
+    for name in PACKAGES[package]:
+        assert any(ep.name == name and ep.group == "ramp.modules" for ep in dist.entry_points)
+        assert any(ep.name == f"module.{name}" for ep in dist.entry_points)
+
+
+def test_the_guide_s_winch_runs_under_ramp_run_sim_and_stops_at_the_top() -> None:
+    proc, host, port = start_ramp(["--sim", "--config", "examples/ramp-winch/winch.yaml",
+                                   "--host", "127.0.0.1", "--port", "0"])
+    try:
+        with socket.create_connection((host, port), timeout=5) as s:
+            assert ask_line(s, "robot:robot.modules=()") == "robot:robot.modules=(winch)"
+            assert "winch:rope.function=(vel,int -100..100)" in ask_line(
+                s, "winch:winch.describe=()")
+            assert ask_line(s, "winch:rope.vel=(100)") == ""
+            deadline = time.monotonic() + 15
+            line = ""
+            while time.monotonic() < deadline:
+                line = ask_line(s, "winch:winch.get=()")
+                if "top.press=(1)" in line:
+                    break
+                time.sleep(0.2)
+            assert line == "winch:rope.vel=(0)winch:top.press=(1)"
+    finally:
+        _stop(proc)
+
+
+def test_scout_runs_under_ramp_run_sim() -> None:
+    proc, host, port = start_ramp(["--sim", "--config", "examples/robots/scout.yaml",
+                                   "--host", "127.0.0.1", "--port", "0"])
+    try:
+        with socket.create_connection((host, port), timeout=5) as s:
+            assert ask_line(s, "robot:robot.modules=()") == "robot:robot.modules=(base,arm)"
+            assert ask_line(s, "arm:shoulder.pos=(45)") == ""
+            assert ask_line(s, "base:base.drive=(30,0)") == ""
+            assert "base:left_wheel.vel=(30)" in ask_line(s, "base:base.get=()")
+    finally:
+        _stop(proc)
+
+
+def _stop(proc: Popen[str]) -> None:
+    proc.send_signal(signal.SIGTERM)
+    try:
+        proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0
