@@ -60,6 +60,8 @@ fuzz: $(STAMP)
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis .import_linter_cache
 
-# Refresh the README's console screenshot: the browser tests take it (docs/img/teleop.png).
+# Refresh the console screenshots: the browser tests take them (docs/img/teleop.png, and
+# docs/img/console-scout.png of Scout).
 screenshots: $(STAMP)
-	RAMP_UPDATE_DOCS=1 $(PY) -m pytest -q tests/hil_sim/test_teleop_browser.py
+	RAMP_UPDATE_DOCS=1 $(PY) -m pytest -q tests/hil_sim/test_teleop_browser.py \
+		tests/hil_sim/test_scout_console.py
