@@ -27,8 +27,11 @@ def test_each_example_package_is_installed_with_its_entry_points(package: str) -
         assert any(ep.name == f"module.{name}" for ep in dist.entry_points)
 
 
-def test_the_guide_s_winch_runs_under_ramp_run_sim_and_stops_at_the_top() -> None:
-    proc, host, port = start_ramp(["--sim", "--config", "examples/ramp-winch/winch.yaml",
+@pytest.mark.parametrize("config", ["winch.yaml", "winch-box.yaml"])
+def test_the_guide_s_winch_runs_under_ramp_run_sim_and_stops_at_the_top(config: str) -> None:
+    """winch.yaml: on RAMP's own drivers (the module guide); winch-box.yaml: on the plugin's
+    winchbox driver (the driver guide)."""
+    proc, host, port = start_ramp(["--sim", "--config", f"examples/ramp-winch/{config}",
                                    "--host", "127.0.0.1", "--port", "0"])
     try:
         with socket.create_connection((host, port), timeout=5) as s:

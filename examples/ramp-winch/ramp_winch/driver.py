@@ -35,7 +35,7 @@ class WinchBoxBus(Bus):
     }
     channel_fields: ClassVar[dict[str, dict[str, Field]]] = {
         "motor": {},  # the box has one motor
-        "digital_in": {"input": Field(int, lo=0, hi=1, what="an input of the box (0 or 1)")},
+        "digital_in": {"input": Field(int, lo=0, hi=1, what="an input of the box")},
     }
 
     def __init__(self, name: str, params: Mapping[str, Any]) -> None:
