@@ -20,8 +20,6 @@ import queue
 from collections.abc import Callable
 from typing import Any
 
-from ramp.errors import DeviceError
-
 log = logging.getLogger("ramp.phidget22")
 
 INSTALL_HINT = "install it with: pip install 'ramp[phidget]' and apt-get install libusb-1.0-0"
@@ -35,27 +33,33 @@ RETRY_S = 0.1
 Event = tuple[str, Any, Any]  # (event, which channel, payload)
 
 
-def import_phidget22(name: str, load: Callable[[], Any]) -> Any:
-    """Run `load` (which imports Phidget22 classes); turn a missing package or native library
-    into a DeviceError naming the device and saying how to install it."""
+class PhidgetUnavailable(Exception):
+    """The Phidget22 package or its native library cannot be loaded; the text says how to
+    install it. Callers turn it into their own device error (`DeviceError(name, str(exc))`),
+    since this leaf imports nothing of RAMP."""
+
+
+def import_phidget22(load: Callable[[], Any]) -> Any:
+    """Run `load` (which imports Phidget22 classes); a missing package or native library is
+    PhidgetUnavailable (its cause the ImportError or OSError)."""
     try:
         return load()
     except ImportError as exc:
-        raise DeviceError(name, f"the Phidget22 package is not installed; {INSTALL_HINT}"
-                          ) from exc
+        raise PhidgetUnavailable(f"the Phidget22 package is not installed; {INSTALL_HINT}"
+                                 ) from exc
     except OSError as exc:
-        raise DeviceError(name, f"the Phidget22 native library cannot be loaded: {exc}; "
-                          f"{INSTALL_HINT}") from exc
+        raise PhidgetUnavailable(f"the Phidget22 native library cannot be loaded: {exc}; "
+                                 f"{INSTALL_HINT}") from exc
 
 
-def construct(name: str, cls: Callable[[], Any]) -> Any:
+def construct(cls: Callable[[], Any]) -> Any:
     """A Phidget22 channel object. Constructors load libphidget22 (which needs libusb-1.0);
-    when that fails the error says so."""
+    when that fails it is PhidgetUnavailable."""
     try:
         return cls()
     except OSError as exc:
-        raise DeviceError(name, f"the Phidget22 native library cannot be loaded: {exc}; "
-                          f"{INSTALL_HINT}") from exc
+        raise PhidgetUnavailable(f"the Phidget22 native library cannot be loaded: {exc}; "
+                                 f"{INSTALL_HINT}") from exc
 
 
 def match(ch: Any, serial: int, hub_port: int, channel: int) -> None:

@@ -110,7 +110,10 @@ class PhidgetPanTilt(PanTilt):
     # -- lifecycle --------------------------------------------------------------------------
     def _open(self, now: float) -> None:
         if self._api is None:
-            self._api = pc.import_phidget22(self.name, load_phidget22)
+            try:
+                self._api = pc.import_phidget22(load_phidget22)
+            except pc.PhidgetUnavailable as exc:
+                raise DeviceError(self.name, str(exc)) from exc.__cause__
         api = self._api
         q: queue.SimpleQueue[pc.Event] = queue.SimpleQueue()
         self._queue = q
@@ -119,14 +122,14 @@ class PhidgetPanTilt(PanTilt):
                 axis.attached = False
                 axis.position_deg = None
                 axis.sent = {}
-                axis.handle = ch = pc.construct(self.name, api.RCServo)
+                axis.handle = ch = pc.construct(api.RCServo)
                 pc.match(ch, self.config.serial, self.config.hub_port, axis.config.channel)
                 pc.common_handlers(ch, q, idx)
                 self._motion_handlers(ch, q, idx)
                 ch.open()  # returns at once; the attach comes as an event
-        except DeviceError:
+        except pc.PhidgetUnavailable as exc:
             self._close()
-            raise
+            raise DeviceError(self.name, str(exc)) from exc.__cause__
         except api.PhidgetException as exc:
             self._close()
             raise DeviceError(self.name, f"cannot open the {self.where()}: "
