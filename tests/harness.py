@@ -151,6 +151,8 @@ class Harness:
 REPO = __import__("pathlib").Path(__file__).resolve().parent.parent
 MARTE_YAML = (REPO / "ramp.yaml").read_text()
 SCOUT_YAML = (REPO / "examples" / "robots" / "scout.yaml").read_text()
+#: The robots the contract tests run on (SPEC 10): name -> (config text, a MARTE model?).
+ROBOTS = {"marte": (MARTE_YAML, True), "scout": (SCOUT_YAML, False)}
 
 
 class SimHarness(Harness):
@@ -213,3 +215,9 @@ def start_ramp(args: list[str], env: dict[str, str] | None = None,
                 break
     proc.kill()
     raise AssertionError(f"no ready line; stderr: {proc.communicate()[1]}")
+
+
+def robot_harness(name: str, **kwargs: Any) -> SimHarness:
+    """One of `ROBOTS` on its emulators."""
+    text, marte = ROBOTS[name]
+    return SimHarness(text, marte=marte, **kwargs)
