@@ -41,15 +41,28 @@ from ramp.hal.interfaces import (
     ServoChannel,
 )
 from ramp.hal.simio import ServoWorld, SimWorld
-from ramp.layers.functional.base_drive import mix, round_half_away
-from ramp.layers.functional.button import BUTTON_FIELDS, Button
-from ramp.layers.functional.motor import MOTOR_FIELDS, Motor
-from ramp.layers.functional.voltage import (
+from ramp.layers.functional import (
     BATTERY_FIELDS,
+    BUTTON_FIELDS,
+    DISPLAY_FIELDS,
     FILTER_FIELDS,
+    LIFT_FIELDS,
+    LOAD_CELL_FIELDS,
+    MOTOR_FIELDS,
+    POT_FIELDS,
+    BaseDrive,
+    BucketLadder,
+    Button,
+    Led,
+    LoadCell,
+    Motor,
     SystemVoltage,
+    ThompsonActuator,
     Voltage,
+    VoltageDisplay,
+    mix,
 )
+from ramp.layers.functional.base_drive import round_half_away
 from ramp.layers.module_distribution import (
     KINDS as FUNCTION_KINDS,
 )
@@ -104,8 +117,10 @@ class EmulatorContext(Protocol):
 
 
 __all__ = [
-    "API_VERSION", "BATTERY_FIELDS", "BUTTON_FIELDS", "CHANNEL_KINDS", "FILTER_FIELDS",
-    "FUNCTION_KINDS", "MOTOR_FIELDS",
+    "API_VERSION", "BATTERY_FIELDS", "BUTTON_FIELDS", "CHANNEL_KINDS", "DISPLAY_FIELDS",
+    "FILTER_FIELDS", "FUNCTION_KINDS", "LIFT_FIELDS", "LOAD_CELL_FIELDS", "MOTOR_FIELDS",
+    "POT_FIELDS", "BaseDrive", "BucketLadder", "Led", "LoadCell", "ThompsonActuator",
+    "VoltageDisplay",
     "AnalogInput", "Block", "BoundDevice", "BridgeInput", "Bus", "Button", "ConfigError",
     "DeviceError", "DeviceSpec", "DigitalInput", "DigitalOutput", "EmulatorContext", "Field",
     "FlagParam", "FloatParam", "Function", "IntParam", "Kind", "Module", "Motor",
