@@ -52,26 +52,23 @@ from firmware_like.arena import (
     start_pose,
 )
 from firmware_like.arena_params import ArenaParams
+from firmware_like.bucket_ladder import CHAINS, LIFT, BucketLadderExcavator, clipped_gauss
 from firmware_like.marte_params import MarteParams
 from firmware_like.terrain import Terrain
 
 LEFT_WHEELS = ("base.lf_wheel", "base.lb_wheel")
 RIGHT_WHEELS = ("base.rf_wheel", "base.rb_wheel")
 WHEELS = LEFT_WHEELS + RIGHT_WHEELS
-CHAINS = ("ble.chain_left", "ble.chain_right")
-LIFT = "ble.lift_motor"
 MOTORS = WHEELS + CHAINS + (LIFT,)
 ANALOG_INPUTS = ("base.battery", "ble.lift_pot")
 DIGITAL_INPUTS = ("base.l_button", "base.r_button")
 DIGITAL_OUTPUTS = ("base.user_led", "base.led_high", "base.led_mid", "base.led_low")
 BRIDGE_INPUTS = ("ble.load_cell",)
 
-# Sign from a motor's duty to its useful direction (wheel forward, chain digging, lift up).
+# Sign from a wheel motor's duty to rolling forward (the BLE's are in its own part).
 _MOUNT: dict[str, float] = {
     "base.lf_wheel": 1.0, "base.lb_wheel": 1.0,
     "base.rf_wheel": -1.0, "base.rb_wheel": -1.0,
-    "ble.chain_left": 1.0, "ble.chain_right": -1.0,
-    "ble.lift_motor": 1.0,
 }
 
 REGIONS = ("start", "obstacle", "dig")
@@ -144,16 +141,15 @@ class MarteWorld:
         self._rng = random.Random(seed)
         self._ocv_soc = [s for s, _ in p.ocv_curve]
         self._ocv_volts = [v * p.battery_cells for _, v in p.ocv_curve]
-        self._duty: dict[str, float] = dict.fromkeys(MOTORS, 0.0)
-        # Each motor's speed as a fraction of its free speed at `motor_ref_voltage`, in the
-        # motor's own sense (positive duty -> positive speed).
-        self._speed: dict[str, float] = dict.fromkeys(MOTORS, 0.0)
+        self._duty: dict[str, float] = dict.fromkeys(WHEELS, 0.0)
+        # Each wheel motor's speed as a fraction of its free speed at `motor_ref_voltage`, in
+        # the motor's own sense (positive duty -> positive speed).
+        self._speed: dict[str, float] = dict.fromkeys(WHEELS, 0.0)
         self._outputs: dict[str, bool] = dict.fromkeys(DIGITAL_OUTPUTS, False)
         self._unplugged: set[str] = set()
-        self._lift_jammed = False
-        self._lift_blocked = False
-        self._digging = False
-        self._chain_dig_speed = 0.0
+        #: The Bucket Ladder Excavator, a part of its own that this chassis carries and steps
+        #: (`firmware_like.bucket_ladder`); the `ble` module's signals are its.
+        self.ble = BucketLadderExcavator(self.params)
         self.time = 0.0
         #: Moves on whenever what the read_* methods return may have changed (a step, a
         #: placement), so a reader need not sample again while it stands still.
@@ -188,11 +184,6 @@ class MarteWorld:
             self.heading = math.remainder(math.radians(pose.yaw_deg), 2.0 * math.pi)
         self.start_pose = Pose(self.x, self.y, self.heading_deg)
         self._settle()
-        self.lift_pos = 0.0
-        self.bin_kg = 0.0
-        self.delivered_kg = 0.0
-        self.spilled_kg = 0.0
-        self.excavated_kg = 0.0
         self.battery_soc = p.initial_soc
         self.battery_current = p.idle_current
         self.battery_voltage = self._ocv(self.battery_soc) - self.battery_current * (
@@ -219,22 +210,21 @@ class MarteWorld:
         duty = float(duty)
         if not math.isfinite(duty):
             raise ValueError(f"duty for {name} must be finite, got {duty!r}")
-        self._duty[name] = max(-1.0, min(1.0, duty))
+        duties = self.ble.duty if self.ble.owns_motor(name) else self._duty
+        duties[name] = max(-1.0, min(1.0, duty))
 
     def duty(self, name: str) -> float:
         """The duty last commanded to a motor (what the controller is applying now)."""
         _known(name, "motor", MOTORS)
-        return self._duty[name]
+        return self.ble.duty[name] if self.ble.owns_motor(name) else self._duty[name]
 
     def read_analog(self, name: str) -> float:
         """Volts at the ADC pin, as sampled at the last step."""
         _known(name, "analog input", ANALOG_INPUTS)
         p = self.params
-        if name == "base.battery":
-            volts = p.v_sensor_offset + p.v_sensor_gain * self.battery_voltage
-        else:
-            span = p.pot_extended_volts - p.pot_retracted_volts
-            volts = p.pot_retracted_volts + span * self.lift_pos
+        if name != "base.battery":
+            return self.ble.read_pot()
+        volts = p.v_sensor_offset + p.v_sensor_gain * self.battery_voltage
         return volts + self._noise[name]
 
     def read_digital(self, name: str) -> bool:
@@ -257,8 +247,7 @@ class MarteWorld:
     def read_bridge(self, name: str) -> float:
         """Load cell ratio in mV/V: an offset for the empty bin plus the regolith's weight."""
         _known(name, "bridge input", BRIDGE_INPUTS)
-        p = self.params
-        return p.load_cell_offset + p.load_cell_gain * self.bin_kg + self._noise[name]
+        return self.ble.read_load_cell()
 
     def bus_present(self, bus: str) -> bool:
         """False between `unplug(bus)` and `replug(bus)`; any bus name is accepted."""
@@ -285,15 +274,12 @@ class MarteWorld:
             return quantity != 0
         if name == "base.battery":
             return p.v_sensor_offset + p.v_sensor_gain * quantity
-        if name == "ble.lift_pot":
-            return p.pot_retracted_volts + (p.pot_extended_volts - p.pot_retracted_volts) * (
-                quantity)
-        _known(name, "input", BRIDGE_INPUTS)
-        return p.load_cell_offset + p.load_cell_gain * quantity
+        _known(name, "input", ANALOG_INPUTS + BRIDGE_INPUTS)
+        return self.ble.sensor_reading(name, quantity)
 
     def jam_lift(self, jammed: bool) -> None:
         """Stall the lift actuator in place (it draws stall current and does not move)."""
-        self._lift_jammed = bool(jammed)
+        self.ble.lift_jammed = bool(jammed)
 
     def place(self, x: float, y: float, heading_deg: float) -> None:
         """Set the pose (heading counter-clockwise from +x); the footprint must lie inside
@@ -370,12 +356,33 @@ class MarteWorld:
 
     @property
     def lift_jammed(self) -> bool:
-        return self._lift_jammed
+        return self.ble.lift_jammed
 
     @property
     def digging(self) -> bool:
         """True while the last step moved regolith into the bin."""
-        return self._digging
+        return self.ble.digging
+
+    # The BLE's state, read through the robot as before (the referee, traces, tests).
+    @property
+    def lift_pos(self) -> float:
+        return self.ble.lift_pos
+
+    @property
+    def bin_kg(self) -> float:
+        return self.ble.bin_kg
+
+    @property
+    def delivered_kg(self) -> float:
+        return self.ble.delivered_kg
+
+    @property
+    def spilled_kg(self) -> float:
+        return self.ble.spilled_kg
+
+    @property
+    def excavated_kg(self) -> float:
+        return self.ble.excavated_kg
 
     def wheel_speed(self, name: str) -> float:
         """Ground speed of one wheel in m/s, positive rolling the robot forward."""
@@ -385,7 +392,7 @@ class MarteWorld:
     def motor_speed(self, name: str) -> float:
         """Motor speed as a fraction of free speed at the reference voltage, in duty sense."""
         _known(name, "motor", MOTORS)
-        return self._speed[name]
+        return self.ble.speed[name] if self.ble.owns_motor(name) else self._speed[name]
 
     def region(self) -> str:
         """Arena region of the robot's centre: "start", "obstacle" or "dig"."""
@@ -418,7 +425,7 @@ class MarteWorld:
             "delivered_kg": self.delivered_kg, "spilled_kg": self.spilled_kg,
             "excavated_kg": self.excavated_kg, "battery_voltage": self.battery_voltage,
             "battery_current": self.battery_current, "battery_soc": self.battery_soc,
-            "digging": self._digging, "lift_jammed": self._lift_jammed,
+            "digging": self.ble.digging, "lift_jammed": self.ble.lift_jammed,
             "z": self.z, "roll_deg": math.degrees(self.roll),
             "pitch_deg": math.degrees(self.pitch), "collisions": self.collisions,
             "crater_entries": self.crater_entries, "trapped": self.trapped,
@@ -446,12 +453,13 @@ class MarteWorld:
         # voltage is the previous piece's, which keeps the battery-motor loop explicit.
         volt_factor = max(0.0, self.battery_voltage) / p.motor_ref_voltage
         alpha = 1.0 - math.exp(-dt / p.motor_time_constant)
-        for name in MOTORS:
+        for name in WHEELS:
             target = self._duty[name] * volt_factor
             self._speed[name] += (target - self._speed[name]) * alpha
+        self.ble.follow_duty(volt_factor, alpha)
         self._move_chassis(dt)
-        self._move_lift(dt)
-        self._dig_and_dump(dt)
+        self.ble.move_lift(dt)
+        self.ble.dig_and_dump(dt, self.front_x(), self.at_collector)
         self._drain_battery(dt)
         self.time += dt
 
@@ -612,57 +620,12 @@ class MarteWorld:
         elif max(ys) > p.arena_width:
             self.y -= max(ys) - p.arena_width
 
-    def _move_lift(self, dt: float) -> None:
-        p = self.params
-        duty = self._duty[LIFT]
-        at_top = self.lift_pos >= 1.0 and duty > 0.0
-        at_bottom = self.lift_pos <= 0.0 and duty < 0.0
-        if self._lift_jammed or at_top or at_bottom:
-            # A stalled screw does not turn: the motor is held at zero speed.
-            self._speed[LIFT] = 0.0
-            self._lift_blocked = duty != 0.0
-            return
-        self._lift_blocked = False
-        pos = self.lift_pos + self._speed[LIFT] / p.lift_stroke_time * dt
-        if pos >= 1.0 or pos <= 0.0:
-            pos = min(1.0, max(0.0, pos))
-            self._speed[LIFT] = 0.0
-        self.lift_pos = pos
-
-    def _dig_and_dump(self, dt: float) -> None:
-        p = self.params
-        # Both chain motors drive one belt: its speed is their mean in the digging sense.
-        chain = sum(_MOUNT[n] * self._speed[n] for n in CHAINS) / len(CHAINS)
-        self._chain_dig_speed = max(0.0, chain)
-        in_soil = self.lift_pos < p.dig_lift_max
-        in_dig_region = self.front_x() >= p.dig_region_start
-        self._digging = False
-        if chain > 0.0 and in_soil and in_dig_region:
-            room = max(0.0, p.bin_capacity - self.bin_kg)
-            dug = min(room, p.dig_rate * chain * dt)
-            if dug > 0.0:
-                self.bin_kg += dug
-                self.excavated_kg += dug
-                self._digging = True
-        if self.lift_pos > p.dump_lift_min and self.bin_kg > 0.0:
-            out = min(self.bin_kg, p.dump_rate * dt)
-            self.bin_kg -= out
-            if self.at_collector():
-                self.delivered_kg += out
-            else:
-                self.spilled_kg += out
-
     def _drain_battery(self, dt: float) -> None:
         p = self.params
         current = p.idle_current
         for name in WHEELS:
             current += abs(self._duty[name]) * p.wheel_current
-        for name in CHAINS:
-            current += abs(self._duty[name]) * p.chain_current
-            if self._digging:
-                current += p.dig_current * self._chain_dig_speed
-        lift_amps = p.lift_stall_current if self._lift_blocked else p.lift_current
-        current += abs(self._duty[LIFT]) * lift_amps
+        current = self.ble.add_current(current)
         self.battery_current = current
         self.battery_soc = max(0.0, self.battery_soc - current * dt / p.battery_capacity_c)
         ocv = self._ocv(self.battery_soc)
@@ -702,22 +665,19 @@ class MarteWorld:
     def _sample_noise(self) -> None:
         """Draw this step's sensor noise once, so repeated reads agree and runs repeat."""
         p = self.params
-        self._noise = {
-            "base.battery": self._clipped_gauss(p.v_sensor_noise),
-            "ble.lift_pot": self._clipped_gauss(p.pot_noise),
-            "ble.load_cell": self._clipped_gauss(p.load_cell_noise),
-        }
-
-    def _clipped_gauss(self, sigma: float) -> float:
-        if sigma <= 0.0:
-            return 0.0
-        return max(-3.0 * sigma, min(3.0 * sigma, self._rng.gauss(0.0, sigma)))
+        self._noise = {"base.battery": clipped_gauss(self._rng, p.v_sensor_noise)}
+        self.ble.sample_noise(self._rng)
 
 
 def marte_part(ctx: Any, module: str, config: Any) -> MarteWorld:
-    """`ramp.emulators` entries `module.base` and `module.ble`: MARTE's Base and BLE are one
-    coupled model (the lift's current drains the battery the wheels run on, the bin dumps
-    where the chassis stands), so both modules share one `MarteWorld` part: the rig's seeded
-    one when it handed one in, an empty arena otherwise."""
+    """`ramp.emulators` entry `module.base`: MARTE's chassis in its arena (this model; the
+    rig's seeded one when it handed one in, an empty arena otherwise)."""
     world: MarteWorld = ctx.shared("marte", MarteWorld)
     return world
+
+
+def ble_part(ctx: Any, module: str, config: Any) -> BucketLadderExcavator:
+    """`ramp.emulators` entry `module.ble`: the Bucket Ladder Excavator part, carried (and
+    stepped, see `firmware_like.bucket_ladder`) by MARTE's chassis."""
+    world: MarteWorld = ctx.shared("marte", MarteWorld)
+    return world.ble

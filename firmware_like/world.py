@@ -171,5 +171,7 @@ class World:
 
     def step(self, dt: float) -> None:
         for part in self.parts:
-            part.step(dt)
+            step = getattr(part, "step", None)
+            if step is not None:  # a payload its chassis carries is stepped by the chassis
+                step(dt)
         self._own_revision += 1  # a part with no revision of its own is sampled every step
