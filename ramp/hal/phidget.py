@@ -86,6 +86,7 @@ def load_phidget22() -> PhidgetApi:
 # -- events -----------------------------------------------------------------------------------
 # Handlers run on libphidget22's threads and only ever put one of these tuples on the queue:
 # (event, slot index, payload).
+# The first three are the shared adapter's (`ramp.common.phidget22.common_handlers`).
 _ATTACH, _DETACH, _ERROR, _SAMPLE, _WRITTEN = "attach", "detach", "error", "sample", "written"
 Event = tuple[str, int, Any]
 
@@ -327,29 +328,17 @@ class PhidgetBus(Bus):
             raise self._api_error from exc
 
     def _setup(self, ch: Any, slot: _Slot, idx: int, q: queue.SimpleQueue[Event]) -> None:
-        """Matching and handlers, all before `open()` as Phidget22 requires."""
-        ch.setDeviceSerialNumber(self.serial)
-        ch.setHubPort(self.hub_port)
-        ch.setChannel(slot.channel)
+        """Matching and handlers, all before `open()` as Phidget22 requires (the shared
+        adapter's: its attach, detach and error events are this driver's)."""
+        pc.match(ch, self.serial, self.hub_port, slot.channel)
         if self.label:
             ch.setDeviceLabel(self.label)
+        pc.common_handlers(ch, q, idx)
 
-        # These run on libphidget22's threads: put an event on the queue and nothing else.
-        def on_attach(_ch: Any) -> None:
-            q.put((_ATTACH, idx, None))
-
-        def on_detach(_ch: Any) -> None:
-            q.put((_DETACH, idx, None))
-
-        def on_error(_ch: Any, code: Any, description: Any) -> None:
-            q.put((_ERROR, idx, (code, description)))
-
+        # Runs on libphidget22's threads: put an event on the queue and nothing else.
         def on_sample(_ch: Any, value: Any) -> None:
             q.put((_SAMPLE, idx, value))
 
-        ch.setOnAttachHandler(on_attach)
-        ch.setOnDetachHandler(on_detach)
-        ch.setOnErrorHandler(on_error)
         if slot.kind == "analog_in":
             ch.setOnVoltageChangeHandler(on_sample)
         elif slot.kind == "bridge_in":
