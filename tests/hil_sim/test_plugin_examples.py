@@ -4,8 +4,11 @@ through their entry points, run by `ramp run --sim` as a process and driven over
 from __future__ import annotations
 
 import importlib.metadata as md
+import re
 import signal
 import socket
+import subprocess
+import sys
 import time
 from subprocess import Popen
 
@@ -60,6 +63,18 @@ def test_scout_runs_under_ramp_run_sim() -> None:
             assert ask_line(s, "arm:shoulder.pos=(45)") == ""
             assert ask_line(s, "base:base.drive=(30,0)") == ""
             assert "base:left_wheel.vel=(30)" in ask_line(s, "base:base.get=()")
+        # ramp-shell on Scout, unchanged: a table from describe, errors as on MARTE.
+        shell = [sys.executable, "-m", "ramp.shell", f"{host}:{port}"]
+        out = subprocess.run([*shell, "-c", "arm:arm.get=()"], capture_output=True, text=True,
+                             timeout=15)
+        assert out.returncode == 0, out.stderr
+        assert re.search(r"arm\s+shoulder\s+pos\s+-?\d+\.\d+ deg\n", out.stdout), out.stdout
+        assert re.search(r"arm\s+arm\s+stowed\s+[01]\n", out.stdout), out.stdout
+        bad = subprocess.run([*shell, "--raw", "-c", "arm:elbow.pos=(500)"],
+                             capture_output=True, text=True, timeout=15)
+        assert bad.returncode == 1
+        assert bad.stdout.startswith("arm:elbow.error=(bad_params,pos takes one float in "
+                                     "-120..120)")
     finally:
         _stop(proc)
 
