@@ -363,26 +363,46 @@ class MarteWorld:
         """True while the last step moved regolith into the bin."""
         return self.ble.digging
 
-    # The BLE's state, read through the robot as before (the referee, traces, tests).
+    # The BLE's state, through the robot as before (the referee, traces; tests set it).
     @property
     def lift_pos(self) -> float:
         return self.ble.lift_pos
+
+    @lift_pos.setter
+    def lift_pos(self, value: float) -> None:
+        self.ble.lift_pos = value
 
     @property
     def bin_kg(self) -> float:
         return self.ble.bin_kg
 
+    @bin_kg.setter
+    def bin_kg(self, value: float) -> None:
+        self.ble.bin_kg = value
+
     @property
     def delivered_kg(self) -> float:
         return self.ble.delivered_kg
+
+    @delivered_kg.setter
+    def delivered_kg(self, value: float) -> None:
+        self.ble.delivered_kg = value
 
     @property
     def spilled_kg(self) -> float:
         return self.ble.spilled_kg
 
+    @spilled_kg.setter
+    def spilled_kg(self, value: float) -> None:
+        self.ble.spilled_kg = value
+
     @property
     def excavated_kg(self) -> float:
         return self.ble.excavated_kg
+
+    @excavated_kg.setter
+    def excavated_kg(self, value: float) -> None:
+        self.ble.excavated_kg = value
 
     def wheel_speed(self, name: str) -> float:
         """Ground speed of one wheel in m/s, positive rolling the robot forward."""

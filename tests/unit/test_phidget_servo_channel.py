@@ -11,12 +11,13 @@ import pytest
 
 from ramp.hal.interfaces import ServoChannel
 from ramp.hal.phidget import PhidgetBus
-from tests.fake_phidget22 import FakeRCServo
+from tests.fake_phidget22 import FakeRCServo, install
 from tests.unit.test_phidget_driver import FakeBoard, on_library_thread
 
 
 @pytest.fixture
-def rig() -> tuple[PhidgetBus, ServoChannel, FakeRCServo]:
+def rig(monkeypatch: pytest.MonkeyPatch) -> tuple[PhidgetBus, ServoChannel, FakeRCServo]:
+    install(monkeypatch)  # a fresh fake library (another test may have broken the last one)
     board = FakeBoard()
     made: list[FakeRCServo] = []
 
