@@ -44,13 +44,13 @@ from firmware_like.arena import (
     Pose,
     StartSpec,
     collector_span,
-    disc_overlap,
     footprint_corners,
     random_layout,
     region_of,
     seeded_start,
     start_pose,
 )
+from firmware_like.arena_floor import ArenaFloor
 from firmware_like.arena_params import ArenaParams
 from firmware_like.bucket_ladder import CHAINS, LIFT, BucketLadderExcavator, clipped_gauss
 from firmware_like.marte_params import MarteParams
@@ -154,20 +154,9 @@ class MarteWorld:
         #: Moves on whenever what the read_* methods return may have changed (a step, a
         #: placement), so a reader need not sample again while it stands still.
         self.revision = 0
-        self.layout = layout if layout is not None else Layout(source="empty arena")
-        self.terrain = Terrain(self.layout, self.arena, seed, flat=layout is None)
-        self._flat = layout is None
-        self._rocks = [(r.x, r.y, r.radius) for r in self.layout.rocks]
-        self._craters = [(c.x, c.y, c.radius) for c in self.layout.craters]
-        self._reach = math.hypot(p.robot_length, p.robot_width) / 2.0 + max(
-            [r for *_, r in self._rocks + self._craters] + [0.0])
-        self.collisions = 0
-        self.crater_entries = 0
-        self.collision_log: list[tuple[float, str]] = []
-        self.crater_log: list[tuple[float, str]] = []
-        self.trapped = False
-        self._traction = 1.0
-        self._touching: set[str] = set()
+        #: The floor this chassis stands on, a part of its own: the RMC arena's walls, rocks,
+        #: craters and terrain, and the referee's counts (`firmware_like.arena_floor`).
+        self.floor = ArenaFloor(p, self.arena, seed, layout)
         self.z = self.roll = self.pitch = 0.0
         self._velocity = (0.0, 0.0, 0.0)  # world frame, over the last piece (for the IMU)
         self._imu = ImuTruth(0.0, 0.0, 0.0, 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
@@ -363,6 +352,35 @@ class MarteWorld:
         """True while the last step moved regolith into the bin."""
         return self.ble.digging
 
+    # The arena's state and the referee's counts, through the robot as before.
+    @property
+    def layout(self) -> Layout:
+        return self.floor.layout
+
+    @property
+    def terrain(self) -> Terrain:
+        return self.floor.terrain
+
+    @property
+    def collisions(self) -> int:
+        return self.floor.collisions
+
+    @property
+    def crater_entries(self) -> int:
+        return self.floor.crater_entries
+
+    @property
+    def collision_log(self) -> list[tuple[float, str]]:
+        return self.floor.collision_log
+
+    @property
+    def crater_log(self) -> list[tuple[float, str]]:
+        return self.floor.crater_log
+
+    @property
+    def trapped(self) -> bool:
+        return self.floor.trapped
+
     # The BLE's state, through the robot as before (the referee, traces; tests set it).
     @property
     def lift_pos(self) -> float:
@@ -489,8 +507,8 @@ class MarteWorld:
                                            self.pitch)
         left = sum(self._wheel_ground_speed(n) for n in LEFT_WHEELS) / len(LEFT_WHEELS)
         right = sum(self._wheel_ground_speed(n) for n in RIGHT_WHEELS) / len(RIGHT_WHEELS)
-        left *= self._traction
-        right *= self._traction
+        left *= self.floor.traction
+        right *= self.floor.traction
         v = 0.5 * (left + right)
         # Counter-clockwise positive: the right side running faster turns the robot left.
         yaw_rate = p.skid_efficiency * (right - left) / p.track_width
@@ -499,101 +517,25 @@ class MarteWorld:
         self.y += v * math.sin(mid) * dt
         self.heading = math.remainder(self.heading + yaw_rate * dt, 2.0 * math.pi)
         self._clamp_to_arena()
-        if self._rocks:
+        if self.floor.rocks:
             self._push_off_rocks()
         self._update_contacts(count=True)
         self._update_attitude()
         self._update_imu(dt, x0, y0, z0, yaw0, roll0, pitch0)
 
+    # The arena's part (firmware_like/arena_floor.py): walls, rocks, craters and terrain act on
+    # this chassis; these keep the chassis' own names for them.
     def _push_off_rocks(self) -> None:
-        """A rock stops the robot: a footprint deeper into a rock's disc than a wheel can ride
-        up its flank is pushed back out, keeping its heading (it slides along the rock)."""
-        p, ride = self.params, self.arena.rock_ride_up
-        moved = False
-        for cx, cy, r in self._rocks:
-            if (cx - self.x) ** 2 + (cy - self.y) ** 2 >= self._reach ** 2:
-                continue
-            depth, nx, ny = disc_overlap(self.x, self.y, self.heading, p.robot_length,
-                                         p.robot_width, cx, cy, r)
-            limit = min(ride, r)
-            if depth > limit:
-                self.x += nx * (depth - limit)
-                self.y += ny * (depth - limit)
-                moved = True
-        if moved:
-            self._clamp_to_arena()
+        self.floor.push_off_rocks(self)
 
     def _contacts(self) -> tuple[set[str], set[str]]:
-        """(what the footprint collides with, craters it overlaps) now, by SPEC 6.1."""
-        p, a = self.params, self.arena
-        eps = a.contact_epsilon
-        corners = self._corners()
-        hits: set[str] = set()
-        at_x0 = [i for i, c in enumerate(corners) if c[0] <= eps]
-        if at_x0:
-            lo, hi = collector_span(p)
-            docking = (all(i >= 2 for i in at_x0)  # only rear corners touch
-                       and min(c[0] for c in corners) >= -a.docking_tolerance
-                       and all(lo <= corners[i][1] <= hi for i in at_x0))
-            if not docking:
-                hits.add("wall x=0")
-        if any(c[0] >= p.arena_length - eps for c in corners):
-            hits.add(f"wall x={p.arena_length:g}")
-        if any(c[1] <= eps for c in corners):
-            hits.add("wall y=0")
-        if any(c[1] >= p.arena_width - eps for c in corners):
-            hits.add(f"wall y={p.arena_width:g}")
-        craters: set[str] = set()
-        for kind, discs, out in (("rock", self._rocks, hits), ("crater", self._craters,
-                                                                craters)):
-            for i, (cx, cy, r) in enumerate(discs):
-                if (cx - self.x) ** 2 + (cy - self.y) ** 2 >= self._reach ** 2:
-                    continue
-                depth, _, _ = disc_overlap(self.x, self.y, self.heading, p.robot_length,
-                                           p.robot_width, cx, cy, r)
-                if depth > 0.0:
-                    out.add(f"{kind} {i}")
-        return hits, craters
+        return self.floor.contacts(self)
 
     def _update_contacts(self, count: bool) -> None:
-        """Count each collision and crater entry once, when it begins."""
-        hits, craters = self._contacts()
-        now = hits | craters
-        if count:
-            for what in sorted(hits - self._touching):
-                self.collisions += 1
-                self.collision_log.append((self.time, what))
-            for what in sorted(craters - self._touching):
-                self.crater_entries += 1
-                self.crater_log.append((self.time, what))
-        self._touching = now
+        self.floor.update_contacts(self, count)
 
     def _update_attitude(self) -> None:
-        """Rest the chassis on its four wheels: height, pitch and roll from where each wheel
-        touches the terrain; the deepest wheel in a crater sets the traction."""
-        if self._flat:
-            return
-        p, a = self.params, self.arena
-        c, s = math.cos(self.heading), math.sin(self.heading)
-        hb, ht = p.wheelbase / 2.0, p.track_width / 2.0
-        radius, half_w = p.wheel_diameter / 2.0, p.wheel_width / 2.0
-        z: list[float] = []
-        sink = 0.0
-        for f, lft in ((hb, ht), (hb, -ht), (-hb, ht), (-hb, -ht)):
-            wx, wy = self.x + f * c - lft * s, self.y + f * s + lft * c
-            h, ground = self.terrain.wheel_contact(wx, wy, c, s, radius, half_w)
-            z.append(h)
-            sink = max(sink, ground - h)
-        fl, fr, rl, rr = z
-        self.z = (fl + fr + rl + rr) / 4.0
-        self.pitch = math.asin(max(-1.0, min(1.0, ((rl + rr) - (fl + fr)) / (2.0 * p.wheelbase))))
-        across = 2.0 * p.track_width * math.cos(self.pitch)
-        self.roll = math.asin(max(-1.0, min(1.0, ((fl + rl) - (fr + rr)) / across)))
-        self.trapped = sink >= a.crater_trap_sink
-        if self.trapped:
-            self._traction = 0.0
-        else:
-            self._traction = 1.0 - (1.0 - a.crater_slow_min) * max(0.0, sink) / a.crater_trap_sink
+        self.floor.rest(self)
 
     def _update_imu(self, dt: float, x0: float, y0: float, z0: float, yaw0: float,
                     roll0: float, pitch0: float) -> None:
@@ -626,19 +568,7 @@ class MarteWorld:
                              (0.0, 0.0, 0.0))
 
     def _clamp_to_arena(self) -> None:
-        """Walls stop the robot: push the footprint back inside, keeping its heading."""
-        p = self.params
-        corners = self._corners()
-        xs = [c[0] for c in corners]
-        ys = [c[1] for c in corners]
-        if min(xs) < 0.0:
-            self.x -= min(xs)
-        elif max(xs) > p.arena_length:
-            self.x -= max(xs) - p.arena_length
-        if min(ys) < 0.0:
-            self.y -= min(ys)
-        elif max(ys) > p.arena_width:
-            self.y -= max(ys) - p.arena_width
+        self.floor.clamp(self)
 
     def _drain_battery(self, dt: float) -> None:
         p = self.params
@@ -667,6 +597,10 @@ class MarteWorld:
         v0, v1 = volts[i - 1], volts[i]
         return v0 + (v1 - v0) * (soc - s0) / (s1 - s0)
 
+    def corners(self) -> tuple[tuple[float, float], ...]:
+        """Footprint corners (see `_corners`), for the floor this chassis stands on."""
+        return self._corners()
+
     def _corners(self) -> tuple[tuple[float, float], ...]:
         """Footprint corners: front-left, front-right, rear-left, rear-right (world x, y),
         worked out again only when the pose moved (the docking buttons read them every
@@ -690,9 +624,11 @@ class MarteWorld:
 
 
 def marte_part(ctx: Any, module: str, config: Any) -> MarteWorld:
-    """`ramp.emulators` entry `module.base`: MARTE's chassis in its arena (this model; the
-    rig's seeded one when it handed one in, an empty arena otherwise)."""
+    """`ramp.emulators` entry `module.base`: MARTE's chassis (this model; the rig's seeded
+    one when it handed one in, an empty arena otherwise). Its floor, the arena, is shared as
+    "floor" for any other part that stands on it."""
     world: MarteWorld = ctx.shared("marte", MarteWorld)
+    ctx.shared("floor", lambda: world.floor)
     return world
 
 
