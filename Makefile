@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak clean
+.PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak soak-safety clean
 
 # RAMP, then the example plugins: Scout's arm, and the guides' winch (SPEC 10: installed as a
 # team installs a plugin package; their entry points are what RAMP finds).
@@ -29,12 +29,16 @@ teleop: $(STAMP)
 	robot=$$!; trap 'kill $$robot 2>/dev/null; wait $$robot 2>/dev/null' EXIT; \
 	$(VENV)/bin/ramp-teleop --backend 127.0.0.1:$(ROBOT_PORT) --http-port $(TELEOP_PORT)
 
-# A whole RMC mission on the wall clock, with the operator console to watch it and take over
-# (control.acquire in the console, or `ramp-shell 127.0.0.1:5577`); Ctrl-C stops both.
+# A whole RMC mission on the wall clock, its live view, and the operator console wired to
+# both (SPEC 7.1): open the address it prints to watch the mission's state, map and alerts,
+# and take over from an alert; Ctrl-C stops both. The view also opens in Foxglove
+# (ws://127.0.0.1:$(VIEW_PORT)).
+VIEW_PORT ?= 8765
 mission: $(STAMP)
-	@$(VENV)/bin/ramp sim mission --realtime --port $(ROBOT_PORT) & \
+	@$(VENV)/bin/ramp sim mission --realtime --port $(ROBOT_PORT) --foxglove-port $(VIEW_PORT) & \
 	robot=$$!; trap 'kill $$robot 2>/dev/null; wait $$robot 2>/dev/null' EXIT; \
-	sleep 2; $(VENV)/bin/ramp-teleop --backend 127.0.0.1:$(ROBOT_PORT) --http-port $(TELEOP_PORT)
+	sleep 2; $(VENV)/bin/ramp-teleop --backend 127.0.0.1:$(ROBOT_PORT) \
+	  --autonomy 127.0.0.1:$(VIEW_PORT) --http-port $(TELEOP_PORT)
 
 # The issue's campaign: 40 seeded missions over both start boxes and all four headings.
 campaign: $(STAMP)
@@ -57,11 +61,15 @@ bench-quick: $(STAMP)
 fuzz: $(STAMP)
 	RAMP_FUZZ_EXAMPLES=20000 $(PY) -m pytest tests/fuzz -q
 
+# The model-based test of SPEC 2.2 (watchdog, latched faults) at length: `make test` runs 12.
+soak-safety: $(STAMP)
+	RAMP_SAFETY_EXAMPLES=400 $(PY) -m pytest tests/hil_sim/test_safety_model.py -q
+
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis .import_linter_cache
 
-# Refresh the console screenshots: the browser tests take them (docs/img/teleop.png, and
-# docs/img/console-scout.png of Scout).
+# Refresh the console's screenshots: the browser tests take them (docs/img/teleop.png,
+# docs/img/console-autonomy.png, and docs/img/console-scout.png of Scout).
 screenshots: $(STAMP)
 	RAMP_UPDATE_DOCS=1 $(PY) -m pytest -q tests/hil_sim/test_teleop_browser.py \
-		tests/hil_sim/test_scout_console.py
+	  tests/hil_sim/test_console_autonomy_browser.py tests/hil_sim/test_scout_console.py

@@ -53,6 +53,7 @@ from ramp.layers.functional import (
     BaseDrive,
     BucketLadder,
     Button,
+    FaultLatch,
     Led,
     LoadCell,
     Motor,
@@ -80,7 +81,7 @@ from ramp.mcp.params import FlagParam, FloatParam, IntParam, Param
 from ramp.schema import Block, Field, Rule
 
 #: The version of this API (semantic versioning).
-API_VERSION = "1.0"
+API_VERSION = "1.1"
 
 #: HAL channel kinds a `DeviceSpec` may name (motor, analog_in, digital_in, digital_out,
 #: bridge_in, servo).
@@ -119,7 +120,7 @@ class EmulatorContext(Protocol):
 __all__ = [
     "API_VERSION", "BATTERY_FIELDS", "BUTTON_FIELDS", "CHANNEL_KINDS", "DISPLAY_FIELDS",
     "FILTER_FIELDS", "FUNCTION_KINDS", "LIFT_FIELDS", "LOAD_CELL_FIELDS", "MOTOR_FIELDS",
-    "POT_FIELDS", "BaseDrive", "BucketLadder", "Led", "LoadCell", "ThompsonActuator",
+    "POT_FIELDS", "BaseDrive", "BucketLadder", "FaultLatch", "Led", "LoadCell", "ThompsonActuator",
     "VoltageDisplay",
     "AnalogInput", "Block", "BoundDevice", "BridgeInput", "Bus", "Button", "ConfigError",
     "DeviceError", "DeviceSpec", "DigitalInput", "DigitalOutput", "EmulatorContext", "Field",
