@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak clean
+.PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak clean docs
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -54,7 +54,12 @@ fuzz: $(STAMP)
 	RAMP_FUZZ_EXAMPLES=20000 $(PY) -m pytest tests/fuzz -q
 
 clean:
-	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis .import_linter_cache
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis .import_linter_cache site
+
+# The documentation site (docs/, mkdocs.yml) into site/; open site/index.html. --strict: a
+# broken link, anchor or API page fails it. tests/unit/test_docs.py builds it in `make test`.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
 # Refresh the README's console screenshot: the browser tests take it (docs/img/teleop.png).
 screenshots: $(STAMP)
