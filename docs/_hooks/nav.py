@@ -1,4 +1,5 @@
-"""The site's one build hook: the nav as the pages on disk make it.
+"""The site's one build hook: the nav as the pages on disk make it, and the API reference as
+the modules in the tree make it.
 
 Several people write pages at once, each on a branch of their own. Listing a page in the
 nav before it exists would fail the strict build, and a placeholder in its place would
@@ -7,17 +8,24 @@ collide with the real page at merge. So pages still to come are named in mkdocs.
 says so (at INFO, so --strict still passes). A missing page that is not pending still
 fails the build, as mkdocs has it. And every `developing/fixed-*.md` (one "Found and fixed"
 page per branch) is listed under Developing without anyone editing the nav.
+
+The API page names modules that may not be in the tree yet (`ramp.api`, which the plugin
+work adds) with a marker, `<!-- api: ramp.api -->`: the hook puts mkdocstrings' `::: ramp.api`
+in its place once `ramp/api.py` (or `ramp/api/`) exists, and a line saying it is still to
+come until then.
 """
 
 from __future__ import annotations
 
 import logging
+import re
 from pathlib import Path
 from typing import Any
 
 log = logging.getLogger("mkdocs.hooks.nav")
 
 FIXED_SECTION = "Found and fixed"
+API_MARKER = re.compile(r"^<!-- api: ([\w.]+) -->$", re.M)
 
 
 def _prune(items: list[Any], missing: set[str]) -> list[Any]:
@@ -68,3 +76,24 @@ def on_config(config: Any) -> Any:
                 break
     config["nav"] = nav
     return config
+
+
+def _module_in_tree(root: Path, dotted: str) -> bool:
+    path = root.joinpath(*dotted.split("."))
+    return path.with_suffix(".py").is_file() or (path / "__init__.py").is_file()
+
+
+def api_markdown(markdown: str, root: Path) -> str:
+    """The page with each API marker replaced by its module's reference, or a note."""
+    def replace(match: re.Match[str]) -> str:
+        dotted = match.group(1)
+        if _module_in_tree(root, dotted):
+            return f"::: {dotted}"
+        log.info("api: %s is not in the tree yet; its reference is left out", dotted)
+        return f"*`{dotted}` is not in this version of RAMP yet.*"
+    return API_MARKER.sub(replace, markdown)
+
+
+def on_page_markdown(markdown: str, page: Any, config: Any, files: Any) -> str:
+    root = Path(config["config_file_path"]).parent
+    return api_markdown(markdown, root)

@@ -227,3 +227,17 @@ def test_the_site_builds_strictly(tmp_path: Path) -> None:
         assert html.is_file(), f"{name(page)} was not built"
     api = (site / "extending" / "api" / "index.html").read_text(encoding="utf-8")
     assert "McpClient" in api and "parse_response_line" in api, "the API reference is empty"
+
+
+def test_the_api_page_documents_a_module_once_it_is_in_the_tree(tmp_path: Path) -> None:
+    hook = _hook()
+    page = "Intro\n\n<!-- api: ramp.api -->\n\n<!-- api: ramp.mcp -->\n"
+    (tmp_path / "ramp" / "mcp").mkdir(parents=True)
+    (tmp_path / "ramp" / "mcp" / "__init__.py").write_text("")
+    before = hook.api_markdown(page, tmp_path)
+    assert "::: ramp.api" not in before and "`ramp.api` is not in this version" in before
+    assert "::: ramp.mcp\n" in before
+    (tmp_path / "ramp" / "api.py").write_text('"""The plugin API."""\n')
+    assert "::: ramp.api\n" in hook.api_markdown(page, tmp_path)
+    # The real page carries the marker, so the reference appears when ramp/api.py lands.
+    assert "<!-- api: ramp.api -->" in (DOCS / "extending" / "api.md").read_text()
