@@ -83,3 +83,17 @@ def test_the_run_blocks_include_the_shell_against_the_robot() -> None:
                   ("ramp-shell -c 'x'", "ramp-shell 10.0.0.1:5577 -c 'x'"), "")
     assert script(probe, "127.0.0.1:1").split("\n") == [
         "ramp-shell 127.0.0.1:1 -c 'x'", "ramp-shell 10.0.0.1:5577 -c 'x'"]
+
+
+def test_the_api_pages_example_talks_to_a_robot(robot: str) -> None:
+    # The Python example of the API reference, pointed at the test's robot.
+    page = REPO / "docs" / "extending" / "api.md"
+    example = next(b for b in blocks(page) if b.lang == "python")
+    host, port = robot.split(":")
+    code = "\n".join(example.lines).replace('"127.0.0.1", 5577', f'"{host}", {port}')
+    assert code != "\n".join(example.lines), "the example no longer names 127.0.0.1:5577"
+    done = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True,
+                          text=True, timeout=30)
+    assert done.returncode == 0, done.stderr
+    assert "base lf_wheel vel" in done.stdout
+    assert "('bad_params', 'vel takes one int in -100..100')" in done.stdout
