@@ -35,6 +35,22 @@ OURS = re.compile(
     r"|scripts/)")
 
 
+#: Commands that serve until stopped or run for minutes: a block with one must be marked
+#: illustrative, never run by a test.
+NEVER_ENDING = re.compile(r"(^|\s)(make (run|teleop|mission|test|bench|fuzz|campaign)\b"
+                          r"|ramp run\b|ramp-teleop\b|ramp-autonomy --|--realtime)")
+
+
+def runnable(block: Block) -> str | None:
+    """Why a block that is not marked illustrative cannot be run by a test, or None."""
+    for command in block.commands():
+        if not OURS.match(command):
+            return f"`{command}` is not a command of ours"
+        if NEVER_ENDING.search(command):
+            return f"`{command}` does not end by itself"
+    return None
+
+
 def pages() -> list[Path]:
     """The README and every Markdown page of the site (the build hook's folder excluded)."""
     found = sorted(p for p in DOCS.rglob("*.md") if "_hooks" not in p.parts)

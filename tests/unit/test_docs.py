@@ -28,6 +28,7 @@ from tests.docs_pages import (
     links,
     name,
     pages,
+    runnable,
     slug,
 )
 
@@ -127,14 +128,13 @@ def test_every_marker_stands_just_before_a_block(page: Path) -> None:
 
 def test_command_blocks_of_ours_are_either_run_or_marked() -> None:
     # What the command test will run: every unmarked shell block running one of our
-    # commands. There must be some (the README's and the pages' cheap ones), and none of them
-    # may be one that cannot finish (a server or the whole suite).
+    # commands. There must be some (the README's and the pages' cheap ones), and each must be
+    # fit to run: only our commands, none that serves or runs for minutes.
     run = [b for page in PAGES for b in blocks(page) if b.ours() and not b.illustrative]
     assert len(run) >= 5, [b.where for b in run]
-    never_ending = re.compile(r"(^|\s)(make (run|teleop|mission|test|bench|fuzz|campaign)"
-                              r"|ramp run\b|ramp-teleop\b|--realtime)")
-    bad = [b.where for b in run for c in b.commands() if never_ending.search(c)]
-    assert not bad, f"these blocks must be marked illustrative: {bad}"
+    bad = [f"{b.where}: {why}" for b in run if (why := runnable(b)) is not None]
+    assert not bad, "mark these blocks illustrative (or run only our own, quick commands): " \
+        + "; ".join(bad)
 
 
 def test_what_counts_as_a_command_of_ours() -> None:
@@ -147,6 +147,15 @@ def test_what_counts_as_a_command_of_ours() -> None:
               "systemctl status ramp", "python -m http.server"]
     assert [c for c in ours if not OURS.match(c)] == []
     assert [c for c in theirs if OURS.match(c)] == []
+
+
+def test_a_block_is_fit_to_run_only_with_our_own_commands_that_end() -> None:
+    def block(*lines: str) -> Block:
+        return Block(README, 1, "sh", lines, "")
+    assert runnable(block("ramp check ramp.yaml", "ramp-shell -c 'x' || echo refused")) is None
+    assert "not a command of ours" in str(runnable(block("pip install '.[teleop]'")))
+    assert "does not end" in str(runnable(block("ramp-teleop --backend 10.0.0.1:5577")))
+    assert "does not end" in str(runnable(block("make run")))
 
 
 def test_a_console_block_runs_only_its_prompt_lines() -> None:
