@@ -25,12 +25,16 @@ teleop: $(STAMP)
 	robot=$$!; trap 'kill $$robot 2>/dev/null; wait $$robot 2>/dev/null' EXIT; \
 	$(VENV)/bin/ramp-teleop --backend 127.0.0.1:$(ROBOT_PORT) --http-port $(TELEOP_PORT)
 
-# A whole RMC mission on the wall clock, with the operator console to watch it and take over
-# (control.acquire in the console, or `ramp-shell 127.0.0.1:5577`); Ctrl-C stops both.
+# A whole RMC mission on the wall clock, its live view, and the operator console wired to
+# both (SPEC 7.1): open the address it prints to watch the mission's state, map and alerts,
+# and take over from an alert; Ctrl-C stops both. The view also opens in Foxglove
+# (ws://127.0.0.1:$(VIEW_PORT)).
+VIEW_PORT ?= 8765
 mission: $(STAMP)
-	@$(VENV)/bin/ramp sim mission --realtime --port $(ROBOT_PORT) & \
+	@$(VENV)/bin/ramp sim mission --realtime --port $(ROBOT_PORT) --foxglove-port $(VIEW_PORT) & \
 	robot=$$!; trap 'kill $$robot 2>/dev/null; wait $$robot 2>/dev/null' EXIT; \
-	sleep 2; $(VENV)/bin/ramp-teleop --backend 127.0.0.1:$(ROBOT_PORT) --http-port $(TELEOP_PORT)
+	sleep 2; $(VENV)/bin/ramp-teleop --backend 127.0.0.1:$(ROBOT_PORT) \
+	  --autonomy 127.0.0.1:$(VIEW_PORT) --http-port $(TELEOP_PORT)
 
 # The issue's campaign: 40 seeded missions over both start boxes and all four headings.
 campaign: $(STAMP)
@@ -61,6 +65,8 @@ clean:
 docs: $(STAMP)
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
-# Refresh the README's console screenshot: the browser tests take it (docs/img/teleop.png).
+# Refresh the console's screenshots: the browser tests take them (docs/img/teleop.png,
+# docs/img/console-autonomy.png).
 screenshots: $(STAMP)
-	RAMP_UPDATE_DOCS=1 $(PY) -m pytest -q tests/hil_sim/test_teleop_browser.py
+	RAMP_UPDATE_DOCS=1 $(PY) -m pytest -q tests/hil_sim/test_teleop_browser.py \
+	  tests/hil_sim/test_console_autonomy_browser.py

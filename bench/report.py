@@ -306,6 +306,20 @@ def render(doc: dict[str, Any]) -> str:
                 f"{m['delivered_kg']} kg delivered, {m['collisions']} collisions, "
                 f"{m['crater_entries']} crater entries. Wall time by part: "
                 + ", ".join(f"{k} {v} %" for k, v in m["wall_pct_by_part"].items()) + ".", ""]
+    b = doc.get("console_bandwidth")
+    if b and "error" not in b:
+        out += [f"**console_bandwidth** (`ramp-teleop --autonomy` at its defaults on a realtime "
+                f"mission, seed {b['seed']}, {b['seconds']:g} s, each link through a counting "
+                "TCP proxy; budget: 16 kB/s for both together)", "",
+                "| link | bytes/s | up | down |", "|---|---|---|---|"]
+        for name, label in (("mcp", "MCP (status poll and commands)"),
+                            ("view", "autonomy's view")):
+            x = b[name]
+            out.append(f"| {label} | {_num(x['bps'])} | {_num(x['up_bps'])} | "
+                       f"{_num(x['down_bps'])} |")
+        out += [f"| **both** | **{_num(b['total_bps'])}** | | |", "",
+                f"Busiest second {_num(b['busiest_second_bps'])} B/s; the mission went "
+                f"through {', '.join(b['states'])}.", ""]
     return "\n".join(out)
 
 
