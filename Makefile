@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak clean docs
+.PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak soak-safety clean docs
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -56,6 +56,10 @@ bench-quick: $(STAMP)
 
 fuzz: $(STAMP)
 	RAMP_FUZZ_EXAMPLES=20000 $(PY) -m pytest tests/fuzz -q
+
+# The model-based test of SPEC 2.2 (watchdog, latched faults) at length: `make test` runs 12.
+soak-safety: $(STAMP)
+	RAMP_SAFETY_EXAMPLES=400 $(PY) -m pytest tests/hil_sim/test_safety_model.py -q
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis .import_linter_cache site
