@@ -201,8 +201,13 @@ def render(doc: dict[str, Any]) -> str:
                 f"Tick at {t['rate_hz']:g} Hz for {t['duration_s']:g} s with "
                 f"{t['records_per_s']:,} records/s; three processes at the same time, baseline: "
                 "the same loop with the recorder off.", "", HEAD]
+        crowded = t.get("crowded_dir")
         for key, label in (("on", "recorder on"),
-                           ("slow_disk", f"slow disk ({t['slow_disk_bytes_per_s']:,} B/s)")):
+                           ("slow_disk", f"slow disk ({t['slow_disk_bytes_per_s']:,} B/s)"),
+                           ("crowded_dir", f"{crowded['files_before']:,} files in the dir"
+                            if crowded else "")):
+            if key not in t:
+                continue
             r = t[key]
             out += _pcts(f"{label}: lateness", r["late_us"], " µs", ("p50", "p99", "max"))
             out += [_row(f"{label}: overruns", r["overruns"]),
@@ -212,6 +217,11 @@ def render(doc: dict[str, Any]) -> str:
                 f"{sd['written']:,} taken by the writer, the queue ({t['queue_records']:,} "
                 f"records) full at the end; recorder on: {t['on']['dropped']} dropped, "
                 f"{t['on']['bytes_per_record']} bytes per record on disk.", ""]
+        if crowded:
+            out += [f"Crowded directory ({crowded['files_before']:,} files of earlier runs, "
+                    f"keep {crowded['keep']}, a new file every {crowded['max_mb']:g} MB): "
+                    f"{crowded['dropped']:,} records dropped, {crowded['written']:,} written, "
+                    f"{crowded['files_left']} file left.", ""]
         rr = rc.get("ramp_run")
         if rr:
             on, sd = rr["on"], rr["slow_disk"]

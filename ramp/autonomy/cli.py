@@ -22,7 +22,8 @@ no Origin or a local one are served, and web pages of the origins given with
 `--foxglove-origin ORIGIN` (repeatable, e.g. `https://app.foxglove.dev`).
 
 `check` validates `autonomy.yaml` without touching any hardware, as `ramp check` validates
-`ramp.yaml` (exit 1 when it has errors, each as `file:line: key.path: what was expected`).
+`ramp.yaml` (exit 2 when it has errors, as `ramp check` does; each error is
+`file:line: key.path: what was expected`).
 """
 
 from __future__ import annotations
@@ -101,7 +102,7 @@ def cmd_check(path: str) -> int:
         for err in errors:
             print(err, file=sys.stderr)
         print(f"ramp-autonomy: {len(errors)} error(s) in {path}", file=sys.stderr)
-        return 1
+        return 2
     print(f"{path}: ok")
     for line in summary(cfg):
         print(f"  {line}")
