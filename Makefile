@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak soak-safety clean
+.PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak soak-safety clean docs
 
 # RAMP, then the example plugins: Scout's arm, and the guides' winch (SPEC 10: installed as a
 # team installs a plugin package; their entry points are what RAMP finds).
@@ -66,7 +66,12 @@ soak-safety: $(STAMP)
 	RAMP_SAFETY_EXAMPLES=400 $(PY) -m pytest tests/hil_sim/test_safety_model.py -q
 
 clean:
-	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis .import_linter_cache
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis .import_linter_cache site
+
+# The documentation site (docs/, mkdocs.yml) into site/; open site/index.html. --strict: a
+# broken link, anchor or API page fails it. tests/unit/test_docs.py builds it in `make test`.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
 # Refresh the console's screenshots: the browser tests take them (docs/img/teleop.png,
 # docs/img/console-autonomy.png, and docs/img/console-scout.png of Scout).

@@ -147,6 +147,7 @@ class MarteWorld:
         self._speed: dict[str, float] = dict.fromkeys(WHEELS, 0.0)
         self._outputs: dict[str, bool] = dict.fromkeys(DIGITAL_OUTPUTS, False)
         self._unplugged: set[str] = set()
+        self._wheel_scale = dict(zip(WHEELS, p.wheel_speed_scale, strict=True))
         #: The Bucket Ladder Excavator, a part of its own that this chassis carries and steps
         #: (`firmware_like.bucket_ladder`); the `ble` module's signals are its.
         self.ble = BucketLadderExcavator(self.params)
@@ -507,8 +508,8 @@ class MarteWorld:
                                            self.pitch)
         left = sum(self._wheel_ground_speed(n) for n in LEFT_WHEELS) / len(LEFT_WHEELS)
         right = sum(self._wheel_ground_speed(n) for n in RIGHT_WHEELS) / len(RIGHT_WHEELS)
-        left *= self.floor.traction
-        right *= self.floor.traction
+        left *= self.floor.traction * p.traction
+        right *= self.floor.traction * p.traction
         v = 0.5 * (left + right)
         # Counter-clockwise positive: the right side running faster turns the robot left.
         yaw_rate = p.skid_efficiency * (right - left) / p.track_width
@@ -527,6 +528,12 @@ class MarteWorld:
     # this chassis; these keep the chassis' own names for them.
     def _push_off_rocks(self) -> None:
         self.floor.push_off_rocks(self)
+
+    def contacts(self) -> list[str]:
+        """What the footprint touches now (walls, rocks, craters), as the referee names
+        them; empty when it stands clear."""
+        hits, craters = self._contacts()
+        return sorted(hits | craters)
 
     def _contacts(self) -> tuple[set[str], set[str]]:
         return self.floor.contacts(self)
@@ -584,7 +591,8 @@ class MarteWorld:
     # ---- helpers ------------------------------------------------------------------------------
 
     def _wheel_ground_speed(self, name: str) -> float:
-        return _MOUNT[name] * self._speed[name] * self.params.wheel_free_speed
+        return (_MOUNT[name] * self._speed[name] * self.params.wheel_free_speed
+                * self._wheel_scale[name])
 
     def _ocv(self, soc: float) -> float:
         """Open-circuit voltage of the pack, interpolated in the per-cell curve."""

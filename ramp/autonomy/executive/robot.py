@@ -75,7 +75,13 @@ class RobotLink:
         self._errors.clear()
 
     def problem(self) -> Status | None:
-        """The first error answer to this activity's commands, as a Status; None if none."""
+        """The first error answer to this activity's commands, as a Status; a latched
+        fault the backend reports (`ble:lift.stalled`) as one for the operator; None if
+        none."""
+        if self.value("ble:lift.stalled", 0.0) > 0.5:
+            return Status.needs_operator(
+                "the lift stalled (ble:lift.stalled): the mission stopped and waits for an "
+                "operator to clear it with ble:lift.reset=() and release control")
         for gen, code, detail, request in self._errors:
             if gen == self._gen:
                 return Status.from_mcp_error(code, f"{detail} (to {request})" if detail
