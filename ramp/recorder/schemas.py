@@ -47,6 +47,7 @@ EVENT_KINDS = {
     "watchdog_trip": "the watchdog stopped every module (expiry or its feeder lost)",
     "watchdog": "the watchdog armed (motion) or went idle (nothing moving)",
     "control": "control acquired, released or taken over",
+    "interlock": "an interlock rule became active (why) or was released",
     "stall": "the tick loop stalled and every module was stopped",
     "stop": "robot.stop or a module stop request",
     "fault": "a bus fault (the module state change says which module it hit)",

@@ -1,0 +1,422 @@
+"""Interlocks (SPEC 11): one module's state restricting another's motion, declared as data.
+
+A rule is a condition over get properties (`ramp.layers.robot_distribution.condition`) and one
+action on motion functions named by patterns (`MODULE:DEVICE.FUNCTION`, `*` within a name):
+
+- `refuse`: matching motion requests answer `interlocked`; the matching devices stop when the
+  rule becomes active (a permit checked at the start of a command, PLC practice);
+- `stop`: the same, said as what it is for (a protect: stop now, no new motion);
+- `limit N`: the speed of matching motion (a function's first parameter, an int in %) is
+  clamped to +-N, and motion already faster is brought down each tick. A matching motion
+  function without a speed (`lift.pos`, `lift.extend`) is refused while the limit holds: it
+  would run at a speed the rule forbids. `ramp.config` refuses a limit pattern that names
+  only such functions.
+
+**When rules are evaluated.** Every tick, after the buses sampled their inputs and before any
+module's own work (`tick`), and again for the rules guarding a motion request as it arrives
+(`permit`), since a request earlier in the same message may have changed a reading. The
+cost is one read per property of each rule and one closure per comparison: it grows with
+the rules and nothing else. The reads are the modules' own get properties (`Property.read`),
+the values a get answer is formatted from, never a formatted answer.
+
+**Fail closed.** A rule whose property cannot be read (its module not `ok`, a reading MCP
+cannot carry, a reader that raised) counts as active. A latching rule latches only on its
+condition seen true: a module that is still attaching at boot, or is unplugged, holds its
+rules active while it is unreadable, and they release once it reads clear again.
+
+**Stopping a device** is the device's own speed function at 0 (`lift.vel=(0)` cancels a
+position move too; `base.drive=(0,...)` stops every wheel), or, for a device with no speed
+function, its module's `stop()`: the only stop every module has. Stops are never refused.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import logging
+import math
+import re
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from ramp.layers.module_distribution import Function, Module, Property
+from ramp.layers.robot_distribution.condition import Node, compile_condition, properties
+from ramp.mcp.params import FlagParam, FloatParam, IntParam, Param
+
+log = logging.getLogger("ramp.interlock")
+
+Action = Literal["refuse", "stop", "limit"]
+ACTIONS: tuple[Action, ...] = ("refuse", "stop", "limit")
+#: A rule's name: what `robot:interlock.reset=(NAME)` and the error answers carry.
+RULE_NAME = re.compile(r"[A-Za-z0-9_-]{1,32}\Z")
+PATTERN = re.compile(r"([A-Za-z0-9_*]{1,32}):([A-Za-z0-9_*]{1,32})\.([A-Za-z0-9_*]{1,32})\Z")
+PROPERTY = re.compile(r"([A-Za-z0-9_]{1,32}):([A-Za-z0-9_]{1,32})\.([A-Za-z0-9_]{1,32})\Z")
+
+#: Observer hook: (rule name, active, why, clock time) at every activation and release.
+InterlockHook = Callable[[str, bool, str, float], None]
+
+
+@dataclass(frozen=True)
+class RuleSpec:
+    """One checked rule of `interlocks:` (made by `ramp.config`)."""
+
+    name: str
+    when: Node
+    action: Action
+    #: (pattern, N): N is the limit in % for `limit`, None for `refuse` and `stop`.
+    patterns: tuple[tuple[str, int | None], ...]
+    latch: bool = False
+    line: int = 0
+
+
+# -- what the tables offer (shared with the config check) -----------------------------------
+
+def speed_param(fn: Function) -> IntParam | None:
+    """The speed of a motion function: its first parameter when that is an int in % that
+    includes 0 (`vel=(int -100..100)`, `drive=(int -100..100,float)`); else None."""
+    if fn.kind != "motion" or not fn.params:
+        return None
+    p = fn.params[0]
+    if isinstance(p, IntParam) and -100 <= p.lo <= 0 <= p.hi <= 100 and p.lo < p.hi:
+        return p
+    return None
+
+
+def motion_matches(pattern: str, modules: Mapping[str, Module]) -> list[tuple[str, Function]]:
+    """Every (module name, motion function) the pattern names, in table order."""
+    m = PATTERN.match(pattern)
+    if m is None:
+        return []
+    mp, dp, fp = m.groups()
+    out: list[tuple[str, Function]] = []
+    for name, module in modules.items():
+        if not fnmatch.fnmatchcase(name, mp):
+            continue
+        out.extend((name, fn) for fn in module.functions.values()
+                   if fn.kind == "motion" and fnmatch.fnmatchcase(fn.device, dp)
+                   and fnmatch.fnmatchcase(fn.name, fp))
+    return out
+
+
+def find_property(module: Module, device: str, name: str) -> Property | None:
+    for p in module.properties:
+        if p.device == device and p.name == name:
+            return p
+    return None
+
+
+def _neutral(p: Param) -> Any:
+    """A value of `p` that asks for no motion, for the parameters after a zero speed."""
+    if isinstance(p, IntParam):
+        return min(max(0, p.lo), p.hi)
+    if isinstance(p, FloatParam):
+        lo = -math.inf if p.lo is None else p.lo
+        hi = math.inf if p.hi is None else p.hi
+        return min(max(0.0, lo), hi)
+    if isinstance(p, FlagParam):
+        return 0
+    raise ValueError(f"no neutral value for {p.describe()}")
+
+
+# -- the running rules ----------------------------------------------------------------------
+
+REFUSE, LIMIT = 0, 1
+
+
+@dataclass
+class _Limit:
+    """One speed function a limit rule holds to +-n."""
+
+    slot: Any  # ModuleSlot (not imported: the registry imports this layer's siblings)
+    fn: Function
+    lo: int
+    hi: int
+    #: The device's get row of the same name (`lift.vel` for `lift.vel`), for a function of
+    #: one parameter: what the device runs at now.
+    reading: Callable[[], Any] | None
+
+
+class Rule:
+    """One rule as it runs: its reads, its predicate, its state and what it acts on."""
+
+    def __init__(self, spec: RuleSpec, reads: list[tuple[str, Any, Callable[[], Any]]],
+                 predicate: Callable[[Sequence[float]], bool]) -> None:
+        self.spec = spec
+        self.name = spec.name
+        self.reads = reads  # (property, slot, read)
+        self.predicate = predicate
+        self.active = False
+        self.latched = False
+        self.why = ""
+        #: Devices stopped when the rule becomes active: (slot, device).
+        self.stops: list[tuple[Any, str]] = []
+        self.limits: list[_Limit] = []
+        #: Every function the rule guards (a limit leaves motion of other functions alone).
+        self.functions: set[int] = set()
+
+    def evaluate(self) -> tuple[bool, str]:
+        """(holds, unreadable property or ""): fail closed, so unreadable holds."""
+        values = []
+        for prop, slot, read in self.reads:
+            if slot.state != "ok":
+                return True, prop
+            try:
+                v = read()
+            except Exception:  # a reader that raised is a reading we do not have
+                return True, prop
+            if not isinstance(v, int | float) or v != v or v in (math.inf, -math.inf):
+                return True, prop
+            values.append(v)
+        return self.predicate(values), ""
+
+    def refusal(self) -> str:
+        return f"{self.name} {self.why}"
+
+
+class Interlocks:
+    """Every rule of a robot, bound to its modules' tables (see the module docstring)."""
+
+    def __init__(self, specs: Sequence[RuleSpec], slots: Mapping[str, Any]) -> None:
+        self.slots = slots
+        self.rules: list[Rule] = []
+        self.by_name: dict[str, Rule] = {}
+        #: (module, device, function) -> [(rule, REFUSE or LIMIT, lo, hi)]
+        self.guards: dict[tuple[str, str, str], list[tuple[Rule, int, int, int]]] = {}
+        #: Per module with a limit: the last motion function per device, and the last motion
+        #: request's parameters (valid until another request on the module), see `ran`.
+        self._last_fn: dict[str, dict[str, Function]] = {}
+        self._last_args: dict[str, tuple[Function, list[Any]] | None] = {}
+        self._zero: dict[tuple[str, str], tuple[Function, tuple[Any, ...]] | None] = {}
+        #: Observer hook (the flight recorder): None costs nothing.
+        self.on_change: InterlockHook | None = None
+        #: Called after rules stopped or slowed motion outside a request (the robot layer
+        #: moves its state's version and disarms an idle watchdog).
+        self.on_motion_changed: Callable[[float], None] | None = None
+        modules = {name: slot.module for name, slot in slots.items()}
+        for spec in specs:
+            self._bind(spec, modules)
+
+    def _bind(self, spec: RuleSpec, modules: Mapping[str, Module]) -> None:
+        props = properties(spec.when)
+        reads = []
+        for prop in props:
+            m = PROPERTY.match(prop)
+            module = modules.get(m.group(1)) if m else None
+            p = find_property(module, m.group(2), m.group(3)) if m and module else None
+            if m is None or module is None or p is None:  # the config check prevents this
+                raise ValueError(f"interlock {spec.name}: no property {prop}")
+            reads.append((prop, self.slots[m.group(1)], p.read))
+        rule = Rule(spec, reads, compile_condition(spec.when, {p: i for i, p in
+                                                              enumerate(props)}))
+        stop_devices: dict[tuple[str, str], None] = {}
+        for pattern, n in spec.patterns:
+            for mod, fn in motion_matches(pattern, modules):
+                rule.functions.add(id(fn))
+                key = (mod, fn.device, fn.name)
+                sp = speed_param(fn) if spec.action == "limit" else None
+                if spec.action == "limit" and sp is not None:
+                    assert n is not None
+                    lo, hi = max(sp.lo, -n), min(sp.hi, n)
+                    self.guards.setdefault(key, []).append((rule, LIMIT, lo, hi))
+                    reading = None
+                    if len(fn.params) == 1:
+                        prop_row = find_property(modules[mod], fn.device, fn.name)
+                        reading = prop_row.read if prop_row is not None else None
+                    rule.limits.append(_Limit(self.slots[mod], fn, lo, hi, reading))
+                    self._last_fn.setdefault(mod, {})
+                    self._last_args.setdefault(mod, None)
+                else:
+                    self.guards.setdefault(key, []).append((rule, REFUSE, 0, 0))
+                    stop_devices[(mod, fn.device)] = None
+        for mod, device in stop_devices:
+            rule.stops.append((self.slots[mod], device))
+            self._zero.setdefault((mod, device), _zero_of(modules[mod], device))
+        self.rules.append(rule)
+        self.by_name[rule.name] = rule
+
+    # -- the tick -----------------------------------------------------------------------------
+    def tick(self, now: float, dt: float) -> None:
+        """Scheduler task, before module work: every rule evaluated, limits enforced."""
+        changed = False
+        for rule in self.rules:
+            changed |= self.update(rule, now)
+            if rule.active and rule.limits:
+                changed |= self._bring_down(rule)
+        for name, slot in self.slots.items():
+            if name in self._last_args and self._last_args[name] is not None \
+                    and not (slot.state == "ok" and slot.module.is_moving()):
+                self._last_args[name] = None
+        if changed and self.on_motion_changed is not None:
+            self.on_motion_changed(now)
+
+    def update(self, rule: Rule, now: float) -> bool:
+        """Evaluate one rule; on a change, log it, tell the observer and act. True when
+        devices were told to stop."""
+        holds, unreadable = rule.evaluate()
+        if holds and not unreadable and rule.spec.latch:
+            rule.latched = True
+        active = holds or rule.latched
+        if active == rule.active:
+            return False
+        rule.active = active
+        if not active:
+            rule.why = ""
+            log.info("interlock %s released", rule.name)
+            self._tell(rule, False, "released", now)
+            return False
+        if unreadable:
+            rule.why = f"is active: {unreadable} cannot be read"
+            what = f"active (fail closed): {unreadable} cannot be read"
+        elif holds:
+            rule.why = "is active"
+            what = f"active: {rule.spec.when}"
+        else:  # pragma: no cover - a latch is set only when the condition holds
+            rule.why = "is latched until robot:interlock.reset"
+            what = "latched"
+        if rule.spec.latch:
+            what += f" (latched until robot:interlock.reset=({rule.name}))" if holds and \
+                not unreadable else ""
+        log.warning("interlock %s %s", rule.name, what)
+        self._tell(rule, True, what, now)
+        return self._stop_devices(rule)
+
+    def _tell(self, rule: Rule, active: bool, why: str, now: float) -> None:
+        if self.on_change is not None:
+            self.on_change(rule.name, active, why, now)
+
+    def _stop_devices(self, rule: Rule) -> bool:
+        stopped = False
+        for slot, device in rule.stops:
+            if slot.state != "ok":
+                continue  # its motion is already stopped
+            zero = self._zero.get((slot.name, device))
+            try:
+                if zero is not None:
+                    zero[0].run(*zero[1])
+                else:
+                    slot.module.stop()
+            except Exception:
+                log.exception("interlock %s: stopping %s:%s failed; stopping module %s",
+                              rule.name, slot.name, device, slot.name)
+                try:
+                    slot.module.stop()
+                except Exception:
+                    log.exception("module %s failed to stop", slot.name)
+            stopped = True
+        return stopped
+
+    def _bring_down(self, rule: Rule) -> bool:
+        """Motion of the rule's speed functions already outside +-n: run at the limit."""
+        changed = False
+        for lim in rule.limits:
+            slot = lim.slot
+            if slot.state != "ok":
+                continue
+            fn = lim.fn
+            if lim.reading is not None:
+                last = self._last_fn[slot.name].get(fn.device)
+                if last is not None and id(last) not in rule.functions:
+                    continue  # that motion comes from a function the rule leaves alone
+                try:
+                    v = lim.reading()
+                except Exception:
+                    continue
+                if not isinstance(v, int | float) or v != v or lim.lo <= v <= lim.hi:
+                    continue
+                args: list[Any] = [int(min(max(v, lim.lo), lim.hi))]
+            else:
+                remembered = self._last_args.get(slot.name)
+                if remembered is None or remembered[0] is not fn:
+                    continue
+                args = list(remembered[1])
+                if lim.lo <= args[0] <= lim.hi:
+                    continue
+                args[0] = min(max(args[0], lim.lo), lim.hi)
+            try:
+                fn.run(*args)
+            except Exception:
+                log.exception("interlock %s: slowing %s:%s.%s failed; stopping module %s",
+                              rule.name, slot.name, fn.device, fn.name, slot.name)
+                slot.module.stop()
+                continue
+            log.info("interlock %s: %s:%s.%s brought down to %s", rule.name, slot.name,
+                     fn.device, fn.name, args[0])
+            self.ran(slot.name, fn, args)
+            changed = True
+        return changed
+
+    # -- the request path ---------------------------------------------------------------------
+    def permit(self, module: str, fn: Function, values: list[Any], now: float) -> str | None:
+        """A motion request that passed every other check: None to run it (a limit clamps
+        `values[0]` in place), or why it is refused (`interlocked`)."""
+        guards = self.guards.get((module, fn.device, fn.name))
+        if guards is None:
+            return None
+        refusal = None
+        for rule, effect, lo, hi in guards:
+            if self.update(rule, now) and self.on_motion_changed is not None:
+                self.on_motion_changed(now)
+            if not rule.active:
+                continue
+            if effect == REFUSE:
+                if refusal is None:
+                    refusal = rule.refusal() if rule.spec.action != "limit" else (
+                        f"{rule.name} limits {module}:{fn.device} and {fn.name} has no speed")
+            else:
+                values[0] = min(max(values[0], lo), hi)
+        return refusal
+
+    def ran(self, module: str, fn: Function, values: Sequence[Any]) -> None:
+        """An accepted motion or stop on `module` (only modules a limit watches keep this):
+        the last function per device, and the last request's parameters."""
+        last = self._last_fn.get(module)
+        if last is None:
+            if module == "robot" and fn.kind == "stop":
+                self.stopped_all()
+            return
+        if fn.kind == "motion":
+            last[fn.device] = fn
+            self._last_args[module] = (fn, list(values))
+        else:
+            last.clear()
+            self._last_args[module] = None
+
+    def stopped_all(self) -> None:
+        """`robot.stop` and every other robot-wide stop: nothing is remembered as running."""
+        for module, last in self._last_fn.items():
+            last.clear()
+            self._last_args[module] = None
+
+    def reset(self, name: str, now: float) -> str | None:
+        """`robot:interlock.reset=(NAME)`: None when done (or nothing to do), else why not."""
+        rule = self.by_name[name]
+        if not rule.latched:
+            return None
+        holds, unreadable = rule.evaluate()
+        if unreadable:
+            return f"{name}: {unreadable} cannot be read; reset once it reads clear"
+        if holds:
+            return f"{name}: its condition still holds; reset once it has cleared"
+        rule.latched = False
+        log.info("interlock %s reset", name)
+        self.update(rule, now)
+        return None
+
+    def active_names(self) -> tuple[str, ...]:
+        return tuple(r.name for r in self.rules if r.active)
+
+
+def _zero_of(module: Module, device: str) -> tuple[Function, tuple[Any, ...]] | None:
+    """How to stop one device: its speed function at 0 (one parameter preferred), else None
+    (the module's stop)."""
+    best = None
+    for fn in module.functions.values():
+        if fn.device != device or speed_param(fn) is None:
+            continue
+        try:
+            rest = tuple(_neutral(p) for p in fn.params[1:])
+        except ValueError:
+            continue
+        if best is None or len(fn.params) < len(best[0].params):
+            best = (fn, (0, *rest))
+    return best
