@@ -237,7 +237,8 @@ def _patterns(raw: Any, key: str, line: int, action: str, tables: _Tables, err: 
             raw = [raw]
         if not isinstance(raw, list) or not raw:
             err(key, line, f"expected a list of patterns MODULE:DEVICE.FUNCTION "
-                           f"([\"ble:chain.vel\"]), got {kind_of(raw)}")
+                           f"([\"ble:chain.vel\"]), got "
+                           f"{'an empty list' if raw == [] else kind_of(raw)}")
             return None
         items = [(p, None) for p in raw]
     out: list[tuple[str, int | None]] = []
@@ -264,8 +265,10 @@ def _pattern_problem(pattern: Any, action: str, tables: _Tables) -> str:
     if not isinstance(pattern, str) or not PATTERN.match(pattern):
         return (f"{shorten(repr(pattern))} is not a pattern; expected MODULE:DEVICE.FUNCTION, "
                 "names of letters, digits and _ with * standing for any part of one "
-                "(base:*_wheel.vel)")
-    mod, dev, fn = PATTERN.match(pattern).groups()  # type: ignore[union-attr]
+                "(base:*_wheel.vel), or MODULE:* for all of a module's motion")
+    m = PATTERN.match(pattern)
+    assert m is not None
+    mod, dev, fn = m.group(1), m.group(2) or "*", m.group(3) or "*"
     modules = tables.all()
     broken = [f"{m}: {e}" for m, e in tables.errors.items()]
     if broken:
@@ -277,8 +280,9 @@ def _pattern_problem(pattern: Any, action: str, tables: _Tables) -> str:
         speeds = [f for _, f in matches if speed_param(f) is not None]
         if not speeds:
             names = ", ".join(f"{m}:{f.device}.{f.name}" for m, f in matches)
-            return (f"{pattern}: {names} has no speed to limit (its first parameter is not an "
-                    "int in %); use refuse or stop for it")
+            subject = pattern if names == pattern else f"{pattern} ({names})"
+            return (f"{subject} has no speed to limit (its first parameter is not an int in "
+                    "%); use refuse or stop for it")
     return ""
 
 

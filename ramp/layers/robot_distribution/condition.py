@@ -164,7 +164,7 @@ def tokenize(text: str) -> list[_Token]:
 
 def _unexpected(text: str, pos: int) -> str:
     ch = text[pos]
-    if ch == ":" or re.match(r"[A-Za-z0-9_]+:", text[pos:]):
+    if ch in ":." or re.match(r"[A-Za-z0-9_]+[:.]", text[pos:pos + 40]):
         return ("expected a property MODULE:DEVICE.PROPERTY (names of 1-32 letters, digits "
                 "or _)")
     if ch == "=":

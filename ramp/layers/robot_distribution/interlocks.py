@@ -49,7 +49,9 @@ Action = Literal["refuse", "stop", "limit"]
 ACTIONS: tuple[Action, ...] = ("refuse", "stop", "limit")
 #: A rule's name: what `robot:interlock.reset=(NAME)` and the error answers carry.
 RULE_NAME = re.compile(r"[A-Za-z0-9_-]{1,32}\Z")
-PATTERN = re.compile(r"([A-Za-z0-9_*]{1,32}):([A-Za-z0-9_*]{1,32})\.([A-Za-z0-9_*]{1,32})\Z")
+#: `MODULE:DEVICE.FUNCTION`, or `MODULE:*` for every motion function of a module.
+PATTERN = re.compile(
+    r"([A-Za-z0-9_*]{1,32}):(?:([A-Za-z0-9_*]{1,32})\.([A-Za-z0-9_*]{1,32})|\*)\Z")
 PROPERTY = re.compile(r"([A-Za-z0-9_]{1,32}):([A-Za-z0-9_]{1,32})\.([A-Za-z0-9_]{1,32})\Z")
 
 #: Observer hook: (rule name, active, why, clock time) at every activation and release.
@@ -87,7 +89,7 @@ def motion_matches(pattern: str, modules: Mapping[str, Module]) -> list[tuple[st
     m = PATTERN.match(pattern)
     if m is None:
         return []
-    mp, dp, fp = m.groups()
+    mp, dp, fp = m.group(1), m.group(2) or "*", m.group(3) or "*"
     out: list[tuple[str, Function]] = []
     for name, module in modules.items():
         if not fnmatch.fnmatchcase(name, mp):
