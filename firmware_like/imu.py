@@ -158,6 +158,7 @@ class ImuEmulator:
         azimuth = float(prng.uniform(0.0, 2.0 * math.pi))
         self.shift_axis: Vec3 = (math.cos(azimuth), math.sin(azimuth), 0.0)
         self._shifted: Mat3 | None = None  # the mount once the shift is over
+        self._shift_on = False  # a shift was injected (`shift_now`), whatever the fault
         self._noise_rng = np.random.default_rng(noise_seq)
         self._noise = np.empty(0)
         self._noise_at = 0
@@ -201,10 +202,24 @@ class ImuEmulator:
         self._k = 0
         self._prev = None
 
+    # -- injected from outside (a trainer, a test) ---------------------------------------------
+    def shift_now(self, deg: float) -> None:
+        """The mount rotates `deg` degrees about the seeded horizontal axis, starting now, as
+        an `imu-shift` does (taking `shift_duration_s`). A shift that had begun is completed
+        into the mount first, so shifts add up; the seeded one, if still to come, is
+        replaced by this one."""
+        if self.shift_fraction(float(self.clock.now())) > 0.0:
+            turn = _axis_angle(self.shift_axis, math.radians(self.shift_deg))
+            self.mount_rotation = _mat_mul(turn, self.mount_rotation)
+        self._shift_on = True
+        self.shift_at_s = float(self.clock.now())
+        self.shift_deg = float(deg)
+        self._shifted = None
+
     # -- what the fault did ------------------------------------------------------------------
     def shift_fraction(self, t: float) -> float:
         """How far the imu-shift has gone at clock time t: 0 before, 1 after."""
-        if self.fault != "imu-shift" or t <= self.shift_at_s:
+        if not (self._shift_on or self.fault == "imu-shift") or t <= self.shift_at_s:
             return 0.0
         return min(1.0, (t - self.shift_at_s) / self.model.shift_duration_s)
 

@@ -274,6 +274,23 @@ class MarteWorld:
         """Bring an unplugged bus back."""
         self._unplugged.discard(bus)
 
+    def sensor_reading(self, name: str, quantity: float) -> float | bool:
+        """What input `name` reads (noise-free) when the quantity it senses is `quantity`:
+        the battery sensor at `quantity` rail volts, the lift pot at position `quantity`
+        (0 retracted .. 1 extended), the load cell with `quantity` kg in the bin, a docking
+        button pressed (non-zero) or not. For a simulated input override (a low battery, a
+        pressed button) that goes through the same sensor model as the physics."""
+        p = self.params
+        if name in DIGITAL_INPUTS:
+            return quantity != 0
+        if name == "base.battery":
+            return p.v_sensor_offset + p.v_sensor_gain * quantity
+        if name == "ble.lift_pot":
+            return p.pot_retracted_volts + (p.pot_extended_volts - p.pot_retracted_volts) * (
+                quantity)
+        _known(name, "input", BRIDGE_INPUTS)
+        return p.load_cell_offset + p.load_cell_gain * quantity
+
     def jam_lift(self, jammed: bool) -> None:
         """Stall the lift actuator in place (it draws stall current and does not move)."""
         self._lift_jammed = bool(jammed)

@@ -157,7 +157,7 @@ class SimHarness(Harness):
     (`ramp.simulation.backplane.SimBackplane`)."""
 
     def __init__(self, yaml_text: str = MARTE_YAML, wire_level: bool = True,
-                 seed: int = 0, recorder: Any = None) -> None:
+                 seed: int = 0, recorder: Any = None, observer: Any = None) -> None:
         from firmware_like.marte import MarteWorld
         from ramp.simulation.backplane import SimBackplane
 
@@ -166,7 +166,7 @@ class SimHarness(Harness):
         self.world = MarteWorld(seed=seed)
         self.backplane = SimBackplane(self.config, self.world, wire_level=wire_level)
         self.sup = build(self.config, self.clock, self.backplane.bus_factory,
-                         host="127.0.0.1", port=0, recorder=recorder)
+                         host="127.0.0.1", port=0, recorder=recorder, observer=observer)
         self.backplane.attach(self.sup)
         self.sup.start()
         self.sup.settle()

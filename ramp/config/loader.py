@@ -518,6 +518,10 @@ def _modules(c: _Checker, root: MarkedMap, buses: dict[str, BusConfig],
         if name == "robot":
             c.err(path, line, "`robot` is reserved for robot-level requests")
             continue
+        if name == "sim":
+            c.err(path, line, "`sim` is reserved for the simulator's fault injection "
+                              "(SPEC 12, under --sim)")
+            continue
         if not isinstance(name, str) or not MODULE_NAME.fullmatch(name):
             c.err(path, line, "a module name is 1-32 letters (A-Z, a-z), digits or _, since "
                               "clients address it over MCP (base:base.get=())")

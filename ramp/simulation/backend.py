@@ -21,6 +21,7 @@ from ramp.errors import ConfigErrors
 from ramp.runtime import build
 from ramp.scheduler import Scheduler
 from ramp.simulation.backplane import SimBackplane
+from ramp.simulation.sim_module import SimModule
 
 #: The repository's MARTE wiring, what `ramp run --sim` uses by default.
 DEFAULT_RAMP_YAML = Path(__file__).resolve().parents[2] / "ramp.yaml"
@@ -53,6 +54,13 @@ class SimBackend:
         self.supervisor.start()
         self.supervisor.settle()
         self.closed = False
+
+    @property
+    def sim_module(self) -> SimModule:
+        """The `sim` module (SPEC 12) its backplane added to the robot."""
+        module = self.backplane.sim_module
+        assert isinstance(module, SimModule)
+        return module
 
     @property
     def scheduler(self) -> Scheduler:

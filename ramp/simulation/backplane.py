@@ -83,6 +83,9 @@ class RoutedSignals:
         self.model = model
         self.plain = PlainSignals()
         self._plain_names: set[str] = set()
+        #: Inputs the `sim` module holds at a value (`sim:input.set`): name -> quantity.
+        self.overrides: dict[str, float] = {}
+        self._override_changes = 0
 
     def _route(self, method: str, name: str, *args: Any) -> Any:
         if name not in self._plain_names:
@@ -98,24 +101,52 @@ class RoutedSignals:
         self._route("set_motor", name, duty)
 
     def read_analog(self, name: str) -> float:
+        if name in self.overrides:
+            return float(self._overridden(name))
         return float(self._route("read_analog", name))
 
     def read_digital(self, name: str) -> bool:
+        if name in self.overrides:
+            return bool(self._overridden(name))
         return bool(self._route("read_digital", name))
 
     def write_digital(self, name: str, on: bool) -> None:
         self._route("write_digital", name, on)
 
     def read_bridge(self, name: str) -> float:
+        if name in self.overrides:
+            return float(self._overridden(name))
         return float(self._route("read_bridge", name))
 
     def bus_present(self, bus: str) -> bool:
         return self.model.bus_present(bus)
 
+    # -- the `sim` module's hooks -----------------------------------------------------------
+    def set_input(self, name: str, quantity: float) -> None:
+        """Input `name` reads as if it sensed `quantity` until `clear_input`."""
+        self.overrides[name] = quantity
+        self._override_changes += 1
+
+    def clear_input(self, name: str) -> None:
+        if self.overrides.pop(name, None) is not None:
+            self._override_changes += 1
+
+    def _overridden(self, name: str) -> float | bool:
+        """An overridden input's reading: through the model's sensor (the battery's rail
+        volts become pin volts) where the model knows it, else the value itself."""
+        quantity = self.overrides[name]
+        if name not in self._plain_names:
+            try:
+                return self.model.sensor_reading(name, quantity)
+            except KeyError:
+                pass
+        return quantity
+
     @property
     def revision(self) -> int:
-        """The model's: plain signals never change what they read back."""
-        return int(self.model.revision)
+        """Moves on with the model and with every override: plain signals never change
+        what they read back."""
+        return int(self.model.revision) + self._override_changes
 
 
 class SimBackplane:
@@ -149,6 +180,9 @@ class SimBackplane:
         self.sabertooth: dict[str, Any] = {}
         self.odrive: dict[str, Any] = {}
         self._watched: dict[str, int] = {}
+        #: Buses the `sim` module has unplugged.
+        self.unplugged: set[str] = set()
+        self.sim_module: Any = None  # the `sim` module, made by `attach`
 
     def bus_factory(self, bc: BusConfig) -> Bus:
         if not bc.sim:
@@ -231,10 +265,40 @@ class SimBackplane:
 
     def attach(self, sup: Supervisor) -> None:
         """Step the world (and service emulators) first in every tick; emulators behind a pty
-        also read in the scheduler's I/O wait, so bytes are stamped when they arrive."""
+        also read in the scheduler's I/O wait, so bytes are stamped when they arrive. The
+        `sim` module (SPEC 12) joins the robot's requests."""
+        from ramp.simulation.sim_module import SimModule
+
         self._scheduler = sup.scheduler
         self._clock = sup.clock
         sup.scheduler.add_task("sim.world", sup.scheduler.rate_hz, self.tick)
+        self.sim_module = SimModule(self)
+        sup.robot.add_extra(self.sim_module)
+
+    # -- the `sim` module's hooks (SPEC 12) ---------------------------------------------------
+    def unplug(self, bus: str) -> None:
+        """The bus's emulated device vanishes the way real hardware does: a Sabertooth's pty
+        closes (the driver sees the cable pulled), the ODrive axes fall silent on the CAN
+        bus, a HAL-level sim board reports itself gone. The real hot-plug path notices."""
+        if bus in self.sabertooth:
+            self.sabertooth[bus].link.unplug()
+        elif bus in self.odrive:
+            self.odrive[bus].silence()
+        else:
+            self.world.unplug(bus)
+        self.unplugged.add(bus)
+
+    def plug(self, bus: str) -> None:
+        """The device comes back; the driver's retry (hot plug) finds it again."""
+        if bus in self.sabertooth:
+            link = self.sabertooth[bus].link
+            if not link.plugged:
+                link.replug()
+        elif bus in self.odrive:
+            self.odrive[bus].resume()
+        else:
+            self.world.replug(bus)
+        self.unplugged.discard(bus)
 
     def tick(self, now: float, dt: float) -> None:
         self._watch_ptys()

@@ -148,6 +148,10 @@ class Rig:
         self.perception = Perception(cfg, lidar, imu, pan_tilt, now=now)
         self.perception.add_tasks(self.scheduler)
         self.perception.start(now, stream=stream)
+        #: `sim:lidar.blind=(1)`: every beam returns nothing.
+        self.lidar_blind = False
+        if backend is not None:
+            backend.sim_module.add_sensor_faults(self._set_blind, self.imu_emulator.shift_now)
         self.closed = False
 
     # -- shortcuts ------------------------------------------------------------------------------
@@ -205,6 +209,9 @@ class Rig:
         millimetres, cast with the gimbal where it stood when the beam ahead was measured (the
         emulator asks once the scan is complete, up to a tick later; a sweeping gimbal moves
         meanwhile) and the chassis as it is now (it moves millimetres in that time)."""
+        if self.lidar_blind:
+            return np.full(self.view.params.steps, self.view.params.no_return_mm,
+                           dtype=np.int64)
         front = t + FRONT_STEP_DELAY_S
         return self.view.scan(self.true_lidar_pose(front), digging=self.world.digging).mm
 
@@ -221,6 +228,9 @@ class Rig:
         t1, b = (times[i], angles[i]) if i < len(times) else (self.clock.now(), now)
         f = (t - t0) / (t1 - t0) if t1 > t0 else 1.0
         return (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]))
+
+    def _set_blind(self, on: bool) -> None:
+        self.lidar_blind = on
 
     # -- running --------------------------------------------------------------------------------
     def run_for(self, seconds: float) -> None:

@@ -148,6 +148,10 @@ class RobotDistribution:
         self.interlocks = interlocks if interlocks is not None else Interlocks((), self.slots)
         self.interlocks.on_motion_changed = self._interlock_acted
         self.robot = RobotRequests(self)
+        #: Modules outside the registry (the simulator's `sim`): routed like any module, but
+        #: they use no bus, are never attached or faulted, and `robot.modules`, `robot.get`
+        #: and `robot.stop` leave them out (they move nothing).
+        self.extra: dict[str, Module] = {}
         #: Observer hook (the flight recorder): None costs nothing.
         self.on_control: ControlHook | None = None
 
@@ -170,9 +174,12 @@ class RobotDistribution:
             target: Module = self.robot
         else:
             slot = self.slots.get(module)
-            if slot is None or slot.state != "ok":
+            if slot is not None and slot.state == "ok":
+                target = slot.module
+            elif slot is None and module in self.extra:
+                target = self.extra[module]
+            else:
                 return self._unusable(req, slot)
-            target = slot.module
         fn = target.functions.get((req.device, req.function))
         if fn is not None and not fn.params and not req.params:
             values: list[Any] = []  # the common case: nothing to convert
@@ -218,12 +225,18 @@ class RobotDistribution:
     def _unusable(self, req: Request, slot: ModuleSlot | None) -> bytes:
         """A request to a module that is unknown, or not attached (SPEC 2's order)."""
         if slot is None:
-            known = " ".join(["robot", *self.slots])
+            known = " ".join(["robot", *self.slots, *self.extra])
             return _error(req, "unknown_module", f"no module {req.module}; known: {known}")
         if req.device == req.module and req.function == "stop" and not req.params:
             return b""  # its motion is already stopped
         code = "not_attached" if slot.state == "detached" else "fault"
         return _error(req, code, f"module {slot.name} is {slot.state}: {slot.reason}")
+
+    def add_extra(self, module: Module) -> None:
+        """Route requests to `module` beside the registry's (see `extra`)."""
+        if module.name == "robot" or module.name in self.slots or module.name in self.extra:
+            raise ValueError(f"a module named {module.name} already exists")
+        self.extra[module.name] = module
 
     # -- robot-level functions ----------------------------------------------------------------
     def list_modules(self) -> list[Response]:
