@@ -123,6 +123,8 @@ def _neutral(p: Param) -> Any:
 # -- the running rules ----------------------------------------------------------------------
 
 REFUSE, LIMIT = 0, 1
+#: What a refusal says of a latched rule whose condition has cleared.
+LATCHED = "is latched until robot:interlock.reset"
 
 
 @dataclass
@@ -259,6 +261,8 @@ class Interlocks:
             rule.latched = True
         active = holds or rule.latched
         if active == rule.active:
+            if active and not holds and rule.why != LATCHED:
+                rule.why = LATCHED
             return False
         rule.active = active
         if not active:
@@ -273,7 +277,7 @@ class Interlocks:
             rule.why = "is active"
             what = f"active: {rule.spec.when}"
         else:  # pragma: no cover - a latch is set only when the condition holds
-            rule.why = "is latched until robot:interlock.reset"
+            rule.why = LATCHED
             what = "latched"
         if rule.spec.latch:
             what += f" (latched until robot:interlock.reset=({rule.name}))" if holds and \
