@@ -296,16 +296,43 @@ def parse_condition(text: str) -> Node:
 Predicate = Callable[[Sequence[float]], bool]
 
 
+#: One closure per operator: a comparison in a tick is one index and one compare.
+_COMPARE: dict[str, Callable[[int, float], Predicate]] = {
+    "<": lambda i, k: lambda v: v[i] < k,
+    "<=": lambda i, k: lambda v: v[i] <= k,
+    ">": lambda i, k: lambda v: v[i] > k,
+    ">=": lambda i, k: lambda v: v[i] >= k,
+    "==": lambda i, k: lambda v: v[i] == k,
+    "!=": lambda i, k: lambda v: v[i] != k,
+}
+
+
 def compile_condition(node: Node, index: dict[str, int]) -> Predicate:
     """A predicate over the values of the condition's properties (`index[prop]` is where
     each sits): closures, so a tick's evaluation does no tree walking or dispatch."""
     if isinstance(node, Compare):
-        op, i, k = OPS[node.op], index[node.prop], node.value
-        return lambda v: op(v[i], k)
+        return _COMPARE[node.op](index[node.prop], node.value)
     if isinstance(node, Not):
         inner = compile_condition(node.arg, index)
         return lambda v: not inner(v)
     parts = tuple(compile_condition(a, index) for a in node.args)
+    if len(parts) == 2:  # the common case, without a generator
+        a, b = parts
+        if isinstance(node, All):
+            return lambda v: a(v) and b(v)
+        return lambda v: a(v) or b(v)
+    # Plain loops, not all()/any() over a generator: a third cheaper per tick.
     if isinstance(node, All):
-        return lambda v: all(p(v) for p in parts)
-    return lambda v: any(p(v) for p in parts)
+        def all_of(v: Sequence[float]) -> bool:
+            for p in parts:  # noqa: SIM110 - see above
+                if not p(v):
+                    return False
+            return True
+        return all_of
+
+    def any_of(v: Sequence[float]) -> bool:
+        for p in parts:  # noqa: SIM110 - see above
+            if p(v):
+                return True
+        return False
+    return any_of

@@ -123,6 +123,8 @@ def _neutral(p: Param) -> Any:
 # -- the running rules ----------------------------------------------------------------------
 
 REFUSE, LIMIT = 0, 1
+#: `Rule.evaluate`'s answers besides an unreadable property's index.
+HOLDS, CLEAR = -1, -2
 #: What a refusal says of a latched rule whose condition has cleared.
 LATCHED = "is latched until robot:interlock.reset"
 
@@ -143,11 +145,12 @@ class _Limit:
 class Rule:
     """One rule as it runs: its reads, its predicate, its state and what it acts on."""
 
-    def __init__(self, spec: RuleSpec, reads: list[tuple[str, Any, Callable[[], Any]]],
+    def __init__(self, spec: RuleSpec, index: tuple[int, ...],
                  predicate: Callable[[Sequence[float]], bool]) -> None:
         self.spec = spec
         self.name = spec.name
-        self.reads = reads  # (property, slot, read)
+        #: Where the rule's properties sit in `Interlocks.values`.
+        self.index = index
         self.predicate = predicate
         self.active = False
         self.latched = False
@@ -158,20 +161,13 @@ class Rule:
         #: Every function the rule guards (a limit leaves motion of other functions alone).
         self.functions: set[int] = set()
 
-    def evaluate(self) -> tuple[bool, str]:
-        """(holds, unreadable property or ""): fail closed, so unreadable holds."""
-        values = []
-        for prop, slot, read in self.reads:
-            if slot.state != "ok":
-                return True, prop
-            try:
-                v = read()
-            except Exception:  # a reader that raised is a reading we do not have
-                return True, prop
-            if not isinstance(v, int | float) or v != v or v in (math.inf, -math.inf):
-                return True, prop
-            values.append(v)
-        return self.predicate(values), ""
+    def evaluate(self, values: list[Any]) -> int:
+        """HOLDS, CLEAR, or the index of a property that cannot be read (fail closed: the
+        rule holds), from the values read last (`Interlocks.read`)."""
+        for i in self.index:
+            if values[i] is None:
+                return i
+        return HOLDS if self.predicate(values) else CLEAR
 
     def refusal(self) -> str:
         return f"{self.name} {self.why}"
@@ -184,6 +180,13 @@ class Interlocks:
         self.slots = slots
         self.rules: list[Rule] = []
         self.by_name: dict[str, Rule] = {}
+        #: Every property a rule reads, once: (name, slot, reader), and the values read last
+        #: (None: unreadable). A tick reads each once, however many rules use it.
+        self.props: list[tuple[str, Any, Callable[[], Any]]] = []
+        self.values: list[Any] = []
+        self._prop_index: dict[str, int] = {}
+        #: Per guarded function: the properties its rules read.
+        self._guard_props: dict[tuple[str, str, str], tuple[int, ...]] = {}
         #: (module, device, function) -> [(rule, REFUSE or LIMIT, lo, hi)]
         self.guards: dict[tuple[str, str, str], list[tuple[Rule, int, int, int]]] = {}
         #: Per module with a limit: the last motion function per device, and the last motion
@@ -199,19 +202,27 @@ class Interlocks:
         modules = {name: slot.module for name, slot in slots.items()}
         for spec in specs:
             self._bind(spec, modules)
+        for key, guards in self.guards.items():
+            self._guard_props[key] = tuple(sorted({i for rule, *_ in guards for i in rule.index}))
+        self._all = tuple(range(len(self.props)))
+        self._remembering = [(name, slot) for name, slot in slots.items()
+                             if name in self._last_args]
 
     def _bind(self, spec: RuleSpec, modules: Mapping[str, Module]) -> None:
-        props = properties(spec.when)
-        reads = []
-        for prop in props:
+        for prop in properties(spec.when):
+            if prop in self._prop_index:
+                continue
             m = PROPERTY.match(prop)
             module = modules.get(m.group(1)) if m else None
             p = find_property(module, m.group(2), m.group(3)) if m and module else None
             if m is None or module is None or p is None:  # the config check prevents this
                 raise ValueError(f"interlock {spec.name}: no property {prop}")
-            reads.append((prop, self.slots[m.group(1)], p.read))
-        rule = Rule(spec, reads, compile_condition(spec.when, {p: i for i, p in
-                                                              enumerate(props)}))
+            self._prop_index[prop] = len(self.props)
+            self.props.append((prop, self.slots[m.group(1)], p.read))
+            self.values.append(None)
+        index = self._prop_index
+        rule = Rule(spec, tuple(index[p] for p in properties(spec.when)),
+                    compile_condition(spec.when, index))
         stop_devices: dict[tuple[str, str], None] = {}
         for pattern, n in spec.patterns:
             for mod, fn in motion_matches(pattern, modules):
@@ -241,22 +252,54 @@ class Interlocks:
     # -- the tick -----------------------------------------------------------------------------
     def tick(self, now: float, dt: float) -> None:
         """Scheduler task, before module work: every rule evaluated, limits enforced."""
+        self.read(self._all)
+        values = self.values
         changed = False
         for rule in self.rules:
-            changed |= self.update(rule, now)
+            for i in rule.index:  # Rule.evaluate, inline: this loop is the tick's cost
+                if values[i] is None:
+                    verdict = i
+                    break
+            else:
+                verdict = HOLDS if rule.predicate(values) else CLEAR
+            if verdict == CLEAR and not rule.active:
+                continue  # the common case: nothing to do
+            changed |= self.apply(rule, verdict, now)
             if rule.active and rule.limits:
                 changed |= self._bring_down(rule)
-        for name, slot in self.slots.items():
-            if name in self._last_args and self._last_args[name] is not None \
+        for name, slot in self._remembering:
+            if self._last_args[name] is not None \
                     and not (slot.state == "ok" and slot.module.is_moving()):
                 self._last_args[name] = None
         if changed and self.on_motion_changed is not None:
             self.on_motion_changed(now)
 
+    def read(self, indices: Sequence[int]) -> None:
+        """Read the properties at `indices` now: None for one that cannot be read (its
+        module not `ok`, a reading that is not a finite number, a reader that raised)."""
+        values, props = self.values, self.props
+        for i in indices:
+            _, slot, read = props[i]
+            if slot.state != "ok":
+                values[i] = None
+                continue
+            try:
+                v = read()
+                if v - v != 0:  # NaN or infinite
+                    v = None
+            except Exception:  # a reader that raised is a reading we do not have
+                v = None
+            values[i] = v
+
     def update(self, rule: Rule, now: float) -> bool:
-        """Evaluate one rule; on a change, log it, tell the observer and act. True when
+        """Evaluate one rule on the values read last and `apply` the verdict."""
+        return self.apply(rule, rule.evaluate(self.values), now)
+
+    def apply(self, rule: Rule, verdict: int, now: float) -> bool:
+        """A rule's verdict: on a change, log it, tell the observer and act. True when
         devices were told to stop."""
-        holds, unreadable = rule.evaluate()
+        holds = verdict != CLEAR
+        unreadable = self.props[verdict][0] if verdict >= 0 else ""
         if holds and not unreadable and rule.spec.latch:
             rule.latched = True
         active = holds or rule.latched
@@ -355,13 +398,23 @@ class Interlocks:
     def permit(self, module: str, fn: Function, values: list[Any], now: float) -> str | None:
         """A motion request that passed every other check: None to run it (a limit clamps
         `values[0]` in place), or why it is refused (`interlocked`)."""
-        guards = self.guards.get((module, fn.device, fn.name))
+        key = (module, fn.device, fn.name)
+        guards = self.guards.get(key)
         if guards is None:
             return None
+        self.read(self._guard_props[key])
+        readings = self.values
         refusal = None
+        stopped = False
         for rule, effect, lo, hi in guards:
-            if self.update(rule, now) and self.on_motion_changed is not None:
-                self.on_motion_changed(now)
+            for i in rule.index:  # Rule.evaluate, inline (as in `tick`)
+                if readings[i] is None:
+                    verdict = i
+                    break
+            else:
+                verdict = HOLDS if rule.predicate(readings) else CLEAR
+            if verdict != CLEAR or rule.active:
+                stopped |= self.apply(rule, verdict, now)
             if not rule.active:
                 continue
             if effect == REFUSE:
@@ -370,6 +423,8 @@ class Interlocks:
                         f"{rule.name} limits {module}:{fn.device} and {fn.name} has no speed")
             else:
                 values[0] = min(max(values[0], lo), hi)
+        if stopped and self.on_motion_changed is not None:
+            self.on_motion_changed(now)
         return refusal
 
     def ran(self, module: str, fn: Function, values: Sequence[Any]) -> None:
@@ -398,10 +453,11 @@ class Interlocks:
         rule = self.by_name[name]
         if not rule.latched:
             return None
-        holds, unreadable = rule.evaluate()
-        if unreadable:
-            return f"{name}: {unreadable} cannot be read; reset once it reads clear"
-        if holds:
+        self.read(rule.index)
+        verdict = rule.evaluate(self.values)
+        if verdict >= 0:
+            return f"{name}: {self.props[verdict][0]} cannot be read; reset once it reads clear"
+        if verdict == HOLDS:
             return f"{name}: its condition still holds; reset once it has cleared"
         rule.latched = False
         log.info("interlock %s reset", name)
