@@ -13,7 +13,7 @@ An activity (`ramp.statemachine.activity.Activity`) returns one `Status` from ev
                                               a `fault` answer, a watchdog trip
 
 `Status.from_mcp_error(code, detail)` maps an MCP error response to the right status, so
-every activity treats `not_owner` and `fault` the same way.
+every activity treats `not_owner`, `interlocked` and `fault` the same way.
 """
 
 from __future__ import annotations
@@ -75,10 +75,15 @@ class Status:
     @classmethod
     def from_mcp_error(cls, code: str, detail: str = "") -> Status:
         """An MCP error response (`MODULE:DEVICE.error=(code,detail)`) as a status:
-        `not_owner` is the operator taking over (SPEC 2.2), anything else a fault."""
+        `not_owner` is the operator taking over (SPEC 2.2); `interlocked` is a rule of the
+        robot's refusing this motion now (SPEC 11, the detail starts with the rule's name):
+        the step failed this way, so the mission stops, retries it a bounded number of times
+        (the rule may have cleared) and then waits for the operator; anything else a fault."""
         text = f"{code}: {detail}" if detail else code
         if code == "not_owner":
             return cls.operator(text)
+        if code == "interlocked":
+            return cls.failed(text)
         return cls.fault(text)
 
     @property

@@ -400,6 +400,9 @@ def test_statuses_map_to_triggers_and_mcp_errors() -> None:
     assert Status.running().trigger is None and Status.done().trigger == "finished"
     assert Status.from_mcp_error("not_owner", "operator holds control").trigger == \
         "control_taken"
+    refused = Status.from_mcp_error("interlocked", "chain_needs_ladder_down is active")
+    assert refused.trigger == "failed"
+    assert refused.reason == "interlocked: chain_needs_ladder_down is active"
     fault = Status.from_mcp_error("not_attached", "ble")
     assert fault.trigger == "fault" and fault.reason == "not_attached: ble"
     with pytest.raises(ValueError, match="says why"):
