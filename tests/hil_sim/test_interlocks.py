@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
@@ -263,6 +264,40 @@ def test_fail_closed_a_rule_whose_property_cannot_be_read_is_active(
     h.advance(2.5)  # re-attached within about a second
     assert value(c.ask("robot:robot.get=()"), "robot:ble.state") == "ok"
     assert active(c) == "none"
+
+
+def test_activations_and_releases_are_flight_recorder_events(tmp_path: Path) -> None:
+    from ramp.recorder import Recorder, RecorderConfig
+    from ramp.recorder.reading import Recording
+    from ramp.recorder.summary import Summary, format_report
+
+    rec = Recorder(RecorderConfig(str(tmp_path / "rec")))
+    h = SimHarness(WIRING + RULES, recorder=rec)
+    try:
+        c = h.connect()
+        lift_at(h, c, 0.7)
+        lift_at(h, c, 0.3)
+        assert c.ask("ble:chain.vel=(20)") == ""
+        lift_at(h, c, 0.8)
+        h.advance(0.2)
+    finally:
+        h.close()
+    msgs = list(Recording(sorted((tmp_path / "rec").glob("*.mcap"))))
+    events = [m.data["text"] for m in msgs
+              if m.topic == "/robot/events" and m.data["kind"] == "interlock"]
+    assert events == ["ladder_down_slow active: ble:lift.pos < 0.2",
+                      "chain_needs_ladder_down active: ble:lift.pos > 0.5",
+                      "ladder_down_slow released",
+                      "chain_needs_ladder_down released",
+                      "chain_needs_ladder_down active: ble:lift.pos > 0.5"]
+    summary = Summary()
+    for m in msgs:
+        summary.add(m)
+    report = summary.report()
+    assert report["interlocks"] == {"ladder_down_slow": 1, "chain_needs_ladder_down": 2}
+    assert "interlocked" not in report["error_responses"]
+    assert "interlocks ladder_down_slow 1 activation, chain_needs_ladder_down 2 activations" \
+        in format_report(report)
 
 
 def test_a_latched_rule_does_not_latch_on_an_unreadable_property(h: SimHarness) -> None:
