@@ -303,28 +303,24 @@ class Interlocks:
         if holds and not unreadable and rule.spec.latch:
             rule.latched = True
         active = holds or rule.latched
-        if active == rule.active:
-            if active and not holds and rule.why != LATCHED:
-                rule.why = LATCHED
-            return False
+        was = rule.active
         rule.active = active
+        if active:  # what a refusal says: why it is active now
+            rule.why = (f"is active: {unreadable} cannot be read" if unreadable
+                        else "is active" if holds else LATCHED)
+        if active == was:
+            return False
         if not active:
             rule.why = ""
             log.info("interlock %s released", rule.name)
             self._tell(rule, False, "released", now)
             return False
         if unreadable:
-            rule.why = f"is active: {unreadable} cannot be read"
             what = f"active (fail closed): {unreadable} cannot be read"
-        elif holds:
-            rule.why = "is active"
+        else:
             what = f"active: {rule.spec.when}"
-        else:  # pragma: no cover - a latch is set only when the condition holds
-            rule.why = LATCHED
-            what = "latched"
-        if rule.spec.latch:
-            what += f" (latched until robot:interlock.reset=({rule.name}))" if holds and \
-                not unreadable else ""
+            if rule.spec.latch:
+                what += f" (latched until robot:interlock.reset=({rule.name}))"
         log.warning("interlock %s %s", rule.name, what)
         self._tell(rule, True, what, now)
         return self._stop_devices(rule)
