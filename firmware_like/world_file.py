@@ -17,7 +17,6 @@ import math
 from pathlib import Path
 from typing import Any
 
-from firmware_like import yaml_lines
 from firmware_like.arena import (
     HEADINGS_DEG,
     START_BOXES,
@@ -29,7 +28,7 @@ from firmware_like.arena import (
 )
 from firmware_like.arena_params import ArenaParams
 from firmware_like.marte_params import MarteParams
-from firmware_like.yaml_lines import LinedList, LinedMap
+from ramp.common.yamlload import LinedList, LinedMap, YamlError, parse, read_text, shown
 
 
 class WorldError(ValueError):
@@ -54,11 +53,9 @@ def load_world(path: str | Path, mp: MarteParams | None = None,
     """Read and check a world file; raises WorldFileError listing every problem."""
     name = str(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as exc:
-        raise WorldFileError([WorldError(f"cannot read: {exc.strerror}", file=name)]) from exc
-    except UnicodeDecodeError as exc:
-        raise WorldFileError([WorldError("cannot read: not UTF-8 text", file=name)]) from exc
+        text = read_text(path, what="a world file")
+    except YamlError as exc:
+        raise WorldFileError([WorldError(exc.problem, file=name, line=exc.line)]) from None
     return parse_world(text, name, mp, ap)
 
 
@@ -90,8 +87,8 @@ class _Checker:
 
     def world(self, text: str) -> Layout | None:
         try:
-            root = yaml_lines.load(text)
-        except yaml_lines.YamlSyntaxError as exc:
+            root = parse(text)
+        except YamlError as exc:
             self.err("", exc.line, exc.problem)
             return None
         if root is None:
@@ -99,7 +96,7 @@ class _Checker:
             root.line = 1
         if not isinstance(root, LinedMap):
             self.err("", 1, f"expected a mapping with start, rocks and craters, got "
-                     f"{yaml_lines.kind(root)}")
+                     f"{shown(root)}")
             return None
         self.keys(root, "", _TOP)
         start = self.start(root)
@@ -109,7 +106,7 @@ class _Checker:
         desc = root.get("description")
         if desc is not None and not isinstance(desc, str):
             self.err("description", root.lines.get("description", root.line),
-                     f"expected text, got {yaml_lines.kind(desc)}")
+                     f"expected text, got {shown(desc)}")
         return Layout(rocks, craters, start, source=self.file)
 
     def keys(self, node: LinedMap, path: str, allowed: tuple[str, ...]) -> None:
@@ -134,7 +131,7 @@ class _Checker:
         if not bad and lo is not None:
             bad = value <= lo if lo_open else value < lo
         if bad:
-            self.err(f"{path}.{key}", line, f"expected {what}, got {yaml_lines.kind(value)}")
+            self.err(f"{path}.{key}", line, f"expected {what}, got {shown(value)}")
             return None
         return float(value)
 
@@ -145,13 +142,13 @@ class _Checker:
         line = root.lines.get("start", root.line)
         if not isinstance(node, LinedMap):
             self.err("start", line, f"expected a mapping like {{box: left, heading: 90}}, "
-                     f"got {yaml_lines.kind(node)}")
+                     f"got {shown(node)}")
             return None
         self.keys(node, "start", _START)
         box = node.get("box")
         if box not in START_BOXES:
             where = node.lines.get("box", node.line)
-            got = "missing" if "box" not in node else f"got {yaml_lines.kind(box)}"
+            got = "missing" if "box" not in node else f"got {shown(box)}"
             self.err("start.box", where, f"expected left or right, {got}")
             box = None
         heading = node.get("heading")
@@ -159,7 +156,7 @@ class _Checker:
                       and heading in HEADINGS_DEG)
         if not ok_heading:
             where = node.lines.get("heading", node.line)
-            got = "missing" if "heading" not in node else f"got {yaml_lines.kind(heading)}"
+            got = "missing" if "heading" not in node else f"got {shown(heading)}"
             self.err("start.heading", where, f"expected one of 0, 90, 180, 270 (degrees), {got}")
         x = self.number(node, "x", "start", "an x in metres", required=False)
         y = self.number(node, "y", "start", "a y in metres", required=False)
@@ -183,14 +180,14 @@ class _Checker:
         line = root.lines.get(key, root.line)
         if not isinstance(seq, LinedList):
             self.err(key, line, f"expected a list of {{x, y, d}} mappings, got "
-                     f"{yaml_lines.kind(seq)}")
+                     f"{shown(seq)}")
             return []
         out: list[object] = []
         for i, item in enumerate(seq):
             path = f"{key}[{i}]"
             if not isinstance(item, LinedMap):
                 self.err(path, seq.lines[i], f"expected a mapping like {{x: 2.1, y: 0.9, "
-                         f"d: 0.25}}, got {yaml_lines.kind(item)}")
+                         f"d: 0.25}}, got {shown(item)}")
                 continue
             out.append(check(item, path))
         return out

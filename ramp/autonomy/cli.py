@@ -33,6 +33,7 @@ from collections.abc import Sequence
 from types import FrameType
 
 from ramp.autonomy.config import AutonomyConfig, check_config, parse_address
+from ramp.common.hostport import format_hostport
 
 DEFAULT_CONFIG = "autonomy.yaml"
 STOP_FLUSH_S = 0.3  # after a signal: time for the stop to reach the backend
@@ -43,7 +44,7 @@ def summary(cfg: AutonomyConfig) -> list[str]:
     g = cfg.gimbal
     return [
         f"backend {cfg.backend}",
-        f"lidar {cfg.lidar.host}:{cfg.lidar.port}",
+        f"lidar {format_hostport(cfg.lidar.host, cfg.lidar.port)}",
         f"imu {cfg.imu.driver} serial {cfg.imu.serial} every {cfg.imu.data_interval_ms} ms",
         f"gimbal {g.driver} serial {g.serial}: pan channel {g.pan.channel} "
         f"{g.pan.min_deg:g}..{g.pan.max_deg:g} deg, tilt channel {g.tilt.channel} "
@@ -155,7 +156,8 @@ def run_on_robot(cfg: AutonomyConfig, backend: tuple[str, int], *,
             print(f"ramp-autonomy: --foxglove-port: {exc}", file=sys.stderr)
             return 2
         print(f"ramp-autonomy: foxglove live on {live.url}", flush=True)
-    lidar = HokuyoLidar(f"{cfg.lidar.host}:{cfg.lidar.port}", clock=clock, loop=scheduler)
+    lidar = HokuyoLidar(format_hostport(cfg.lidar.host, cfg.lidar.port), clock=clock,
+                        loop=scheduler)
     imu = driver_class("imu", cfg.imu.driver)(cfg.imu)
     pan_tilt = driver_class("gimbal", cfg.gimbal.driver)(cfg.gimbal)
     perception = Perception(cfg, lidar, imu, pan_tilt, now=now)

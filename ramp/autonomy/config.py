@@ -22,9 +22,10 @@ from typing import Any
 
 from ramp.autonomy.hal import DRIVERS
 from ramp.autonomy.mount import Mount
+from ramp.common.hostport import format_hostport, parse_hostport
+from ramp.common.yamlload import LinedMap, YamlError, kind_of, parse_mapping, read_text
 from ramp.errors import ConfigError, ConfigErrors
 from ramp.schema import Field
-from ramp.yamlmarks import MarkedMap, YamlSyntaxError, kind_of, load_marked
 
 DEFAULT_BACKEND = ("127.0.0.1", 5577)
 DEFAULT_LIDAR_HOST = "192.168.0.10"  # the UTM-30LX-EW's factory address (SPEC 6.2)
@@ -185,27 +186,15 @@ class AutonomyConfig:
 
     @property
     def backend(self) -> str:
-        host = f"[{self.backend_host}]" if ":" in self.backend_host else self.backend_host
-        return f"{host}:{self.backend_port}"
+        return format_hostport(self.backend_host, self.backend_port)
 
 
 def parse_address(text: str) -> tuple[str, int]:
     """`HOST:PORT` (or `[v6]:PORT`) -> (host, port); ValueError says what was expected."""
-    what = "expected HOST:PORT (for example 192.168.1.10:5577)"
-    if not isinstance(text, str) or ":" not in text:
-        raise ValueError(f"{text!r} is not an address; {what}")
-    host, _, port_text = text.rpartition(":")
-    if host.startswith("[") and host.endswith("]"):
-        host = host[1:-1]
-    if not host or " " in host:
-        raise ValueError(f"{text!r} has no host; {what}")
-    try:
-        port = int(port_text)
-    except ValueError:
-        raise ValueError(f"{text!r} has no port number; {what}") from None
-    if not 1 <= port <= 65535:
-        raise ValueError(f"{text!r}: port {port} is outside 1-65535")
-    return host, port
+    if not isinstance(text, str):
+        raise ValueError(f"{text!r} is not an address; expected HOST:PORT (for example "
+                         "192.168.1.10:5577)")
+    return parse_hostport(text, example="192.168.1.10:5577")
 
 
 class _Checker:
@@ -218,20 +207,20 @@ class _Checker:
     def err(self, key: str, line: int, message: str) -> None:
         self.errors.append(ConfigError(message, file=self.file, line=line, key=key))
 
-    def mapping(self, parent: MarkedMap, key: str, path: str) -> MarkedMap | None:
+    def mapping(self, parent: LinedMap, key: str, path: str) -> LinedMap | None:
         """`parent[key]` as a mapping; an empty one when absent, None (and an error) when
         it is something else."""
         raw = parent.get(key)
         if raw is None:
-            empty = MarkedMap()
+            empty = LinedMap()
             empty.line = parent.line_of(key)
             return empty
-        if not isinstance(raw, MarkedMap):
+        if not isinstance(raw, LinedMap):
             self.err(path, parent.line_of(key), f"expected a mapping, got {kind_of(raw)}")
             return None
         return raw
 
-    def values(self, raw: MarkedMap, path: str, fields: Mapping[str, Field],
+    def values(self, raw: LinedMap, path: str, fields: Mapping[str, Field],
                nested: frozenset[str] = frozenset()) -> dict[str, Any]:
         """Check `raw` against `fields`; keys in `nested` are left for the caller. Returns
         checked values, defaults for absent keys and for bad ones (None if required)."""
@@ -255,7 +244,7 @@ class _Checker:
             out[k] = None if f.required else f.default
         return out
 
-    def mount(self, parent: MarkedMap, key: str, path: str) -> Mount:
+    def mount(self, parent: LinedMap, key: str, path: str) -> Mount:
         raw = self.mapping(parent, key, path)
         if raw is None:
             return Mount()
@@ -274,25 +263,19 @@ def check_config(path: str | Path) -> tuple[AutonomyConfig | None, list[ConfigEr
     """(config or None, every error found), without touching any hardware."""
     name = str(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as exc:
-        return None, [ConfigError(f"cannot read: {exc.strerror or exc}", file=name)]
+        text = read_text(path, what="an autonomy config")
+    except YamlError as exc:
+        return None, [ConfigError(exc.problem, file=name, line=exc.line)]
     return parse_config(text, name)
 
 
 def parse_config(text: str, name: str = "autonomy.yaml"
                  ) -> tuple[AutonomyConfig | None, list[ConfigError]]:
     try:
-        root = load_marked(text)
-    except YamlSyntaxError as exc:
+        root = parse_mapping(text, "a mapping of sections")
+    except YamlError as exc:
         return None, [ConfigError(exc.problem, file=name, line=exc.line)]
     c = _Checker(name)
-    if root is None:
-        root = MarkedMap()
-        root.line = 1
-    if not isinstance(root, MarkedMap):
-        c.err("", 1, f"expected a mapping of sections at the top, got {kind_of(root)}")
-        return None, c.errors
     for k in root:
         if k not in TOP_KEYS:
             c.err(str(k), root.line_of(k),
@@ -317,7 +300,7 @@ def parse_config(text: str, name: str = "autonomy.yaml"
                           mission=MappingProxyType(mission)), []
 
 
-def _lidar(c: _Checker, root: MarkedMap) -> LidarConfig:
+def _lidar(c: _Checker, root: LinedMap) -> LidarConfig:
     raw = c.mapping(root, "lidar", "lidar")
     if raw is None:
         return LidarConfig()
@@ -325,7 +308,7 @@ def _lidar(c: _Checker, root: MarkedMap) -> LidarConfig:
     return LidarConfig(host=v["host"], port=v["port"], mount=c.mount(raw, "mount", "lidar.mount"))
 
 
-def _imu(c: _Checker, root: MarkedMap) -> ImuConfig:
+def _imu(c: _Checker, root: LinedMap) -> ImuConfig:
     raw = c.mapping(root, "imu", "imu")
     if raw is None:
         return ImuConfig()
@@ -333,7 +316,7 @@ def _imu(c: _Checker, root: MarkedMap) -> ImuConfig:
     return ImuConfig(**v, mount=c.mount(raw, "mount", "imu.mount"))
 
 
-def _gimbal(c: _Checker, root: MarkedMap) -> GimbalConfig:
+def _gimbal(c: _Checker, root: LinedMap) -> GimbalConfig:
     raw = c.mapping(root, "gimbal", "gimbal")
     if raw is None or "gimbal" not in root:
         return GimbalConfig()
@@ -357,7 +340,7 @@ def _gimbal(c: _Checker, root: MarkedMap) -> GimbalConfig:
                         tilt=axes.get("tilt", default.tilt))
 
 
-def _servo(c: _Checker, gimbal: MarkedMap, axis: str) -> ServoConfig | None:
+def _servo(c: _Checker, gimbal: LinedMap, axis: str) -> ServoConfig | None:
     path = f"gimbal.{axis}"
     if axis not in gimbal:
         c.err(path, gimbal.line, f"missing; expected the {axis} servo's mapping "
@@ -389,7 +372,7 @@ def _servo(c: _Checker, gimbal: MarkedMap, axis: str) -> ServoConfig | None:
     return servo
 
 
-def _mission(c: _Checker, root: MarkedMap) -> dict[str, float]:
+def _mission(c: _Checker, root: LinedMap) -> dict[str, float]:
     out: dict[str, float] = {k: f.default for k, f in MISSION_FIELDS.items()}
     raw = c.mapping(root, "mission", "mission")
     if raw is None:

@@ -20,8 +20,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from ramp.config.loader import MarkedMap
-from ramp.config.loader import _kind as kind_of
+from ramp.common.yamlload import LinedList, LinedMap, kind_of
 from ramp.hal.simio import SimBus
 from ramp.layers.module_distribution import BoundDevice, Module
 from ramp.layers.robot_distribution.condition import (
@@ -123,9 +122,9 @@ def check_interlocks(raw: Any, line: int, modules: Mapping[str, Any], err: Err,
     seen: dict[str, str] = {}
     for i, entry in enumerate(raw):
         path = f"interlocks[{i}]"
-        if not isinstance(entry, MarkedMap):
-            err(path, line, f"expected a rule (a mapping with name, when and one of refuse, "
-                            f"stop, limit), got {kind_of(entry)}")
+        if not isinstance(entry, LinedMap):
+            err(path, _item_line(raw, i, line), "expected a rule (a mapping with name, when "
+                f"and one of refuse, stop, limit), got {kind_of(entry)}")
             continue
         spec = _rule(entry, path, tables, err, modules_ok, seen)
         if spec is not None:
@@ -133,7 +132,7 @@ def check_interlocks(raw: Any, line: int, modules: Mapping[str, Any], err: Err,
     return tuple(out)
 
 
-def _rule(entry: MarkedMap, path: str, tables: _Tables, err: Err, modules_ok: bool,
+def _rule(entry: LinedMap, path: str, tables: _Tables, err: Err, modules_ok: bool,
           seen: dict[str, str]) -> RuleSpec | None:
     def at(key: str) -> int:
         return entry.lines.get(key, entry.line)
@@ -179,7 +178,14 @@ def _rule(entry: MarkedMap, path: str, tables: _Tables, err: Err, modules_ok: bo
     return RuleSpec(name, when, action, patterns, latch, entry.line)
 
 
-def _when(entry: MarkedMap, path: str, at: Callable[[str], int], tables: _Tables, err: Err,
+def _item_line(items: Any, i: int, default: int) -> int:
+    """The line of item `i` of a YAML list (its own line in block style)."""
+    if isinstance(items, LinedList) and i < len(items.lines):
+        return items.lines[i]
+    return default
+
+
+def _when(entry: LinedMap, path: str, at: Callable[[str], int], tables: _Tables, err: Err,
           modules_ok: bool) -> Node | None:
     text = entry.get("when")
     key = f"{path}.when"
@@ -243,18 +249,18 @@ def _patterns(raw: Any, key: str, line: int, action: str, tables: _Tables, err: 
         items = [(p, None) for p in raw]
     out: list[tuple[str, int | None]] = []
     ok = True
-    for pattern, n in items:
-        where = key
+    for i, (pattern, n) in enumerate(items):
+        here = raw.line_of(pattern) if isinstance(raw, LinedMap) else _item_line(raw, i, line)
         if action == "limit" and (not isinstance(n, int) or isinstance(n, bool)
                                   or not 0 <= n <= 100):
-            err(where, raw.lines.get(pattern, line) if isinstance(raw, MarkedMap) else line,
+            err(key, here,
                 f"{shorten(repr(n))} is not a speed limit; expected an integer % in 0-100")
             ok = False
             continue
         problem = _pattern_problem(pattern, action, tables) if modules_ok else (
             "" if isinstance(pattern, str) and PATTERN.match(pattern) else "bad pattern")
         if problem:
-            err(where, line, problem)
+            err(key, here, problem)
             ok = False
             continue
         out.append((pattern, n))

@@ -9,10 +9,11 @@ nothing: drivers and modules are built from that data by `ramp.runtime.build`, s
 check` touches no hardware and runs no module code.
 
 Hostile or broken files end in such an error too, never in a traceback or a hang: the file
-is at most `MAX_FILE_BYTES` of UTF-8, nesting is capped at `MAX_DEPTH` and alias expansion
-at `MAX_NODES` values (a kilobyte "billion laughs" once took 14 s and 800 MB), keys must be
-names (a list or mapping as a key is reported where it is), values are cut short in messages,
-and YAML merge keys (`<<: *defaults`) work as YAML says: explicit keys override merged ones.
+is read by `ramp.common.yamlload` (a regular file of at most `MAX_FILE_BYTES` of UTF-8,
+nesting capped, alias expansion capped, so a kilobyte "billion laughs" that once took 14 s
+and 800 MB fails at once), keys must be names (a list or mapping as a key is reported where
+it is), values are cut short in messages, and YAML merge keys (`<<: *defaults`) work as YAML
+says: explicit keys override merged ones.
 """
 
 from __future__ import annotations
@@ -25,8 +26,16 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-import yaml
-
+from ramp.common.yamlload import (
+    MAX_FILE_BYTES,
+    BadKey,
+    LinedMap,
+    YamlError,
+    kind_of,
+    parse_mapping,
+    read_text,
+)
+from ramp.config.interlocks import check_interlocks
 from ramp.errors import ConfigError, ConfigErrors
 from ramp.hal import driver_class
 from ramp.hal.interfaces import Bus
@@ -37,111 +46,9 @@ from ramp.modules import module_class
 from ramp.recorder.config import RECORDER_FIELDS, RecorderConfig
 from ramp.schema import Block, Field, shorten, validate
 
-#: A config file is a few kB; anything past this is refused before parsing.
-MAX_FILE_BYTES = 1 << 20
-#: Deepest nesting of mappings and lists (a real config needs 4 or 5).
-MAX_DEPTH = 32
-#: Most values the document may expand to once aliases are counted at every use.
-MAX_NODES = 50_000
 #: A module's name is an MCP name (`base:base.get=()`), and `robot` is taken.
 MODULE_NAME = re.compile(r"[A-Za-z0-9_]{1,32}")
 _HOST_LABEL = re.compile(r"[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?")
-
-
-class MarkedMap(dict[Any, Any]):
-    """A YAML mapping that remembers the line of itself and of each key."""
-
-    line: int = 0
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.lines: dict[Any, int] = {}
-        self.duplicates: list[tuple[Any, int]] = []
-
-
-class BadKey:
-    """Stands in for a key YAML allows and a config cannot use (a list or a mapping)."""
-
-    def __init__(self, kind: str, line: int) -> None:
-        self.kind = kind
-        self.line = line
-
-    def __str__(self) -> str:
-        return f"<{self.kind}>"
-
-
-class _Loader(yaml.SafeLoader):
-    """SafeLoader with limits on nesting and on alias expansion."""
-
-    def __init__(self, stream: str) -> None:
-        super().__init__(stream)
-        self._depth = 0
-        self._sizes: dict[int, int] = {}  # id(node) -> values it expands to, aliases included
-
-    def compose_node(self, parent: Any, index: Any) -> Any:
-        if self.check_event(yaml.AliasEvent):
-            return super().compose_node(parent, index)  # counted where it is used
-        self._depth += 1
-        try:
-            if self._depth > MAX_DEPTH:
-                raise yaml.composer.ComposerError(
-                    None, None, f"nested deeper than {MAX_DEPTH} levels",
-                    self.peek_event().start_mark)
-            node = super().compose_node(parent, index)
-        finally:
-            self._depth -= 1
-        if node is None:  # pragma: no cover - only at the end of a stream
-            return node
-        size = 1
-        if isinstance(node, yaml.SequenceNode):
-            size += sum(self._sizes.get(id(n), 1) for n in node.value)
-        elif isinstance(node, yaml.MappingNode):
-            size += sum(self._sizes.get(id(k), 1) + self._sizes.get(id(v), 1)
-                        for k, v in node.value)
-        if size > MAX_NODES:
-            raise yaml.composer.ComposerError(
-                None, None, f"expands to more than {MAX_NODES} values once its aliases are "
-                "counted (an alias bomb?)", node.start_mark)
-        self._sizes[id(node)] = size
-        return node
-
-    def construct_object(self, node: Any, deep: bool = False) -> Any:
-        """A scalar Python cannot build (an integer of 100,000 digits, the 13th month of a
-        timestamp) is a YAML error at its line, not a ValueError from deep inside PyYAML."""
-        try:
-            return super().construct_object(node, deep)
-        except (ValueError, OverflowError) as exc:
-            raise yaml.constructor.ConstructorError(
-                None, None, f"cannot read this value: {shorten(str(exc), 120)}",
-                node.start_mark) from None
-
-
-def _construct_mapping(loader: _Loader, node: yaml.MappingNode) -> MarkedMap:
-    merge_tag = "tag:yaml.org,2002:merge"
-    explicit = sum(1 for k, _ in node.value if k.tag != merge_tag)
-    loader.flatten_mapping(node)
-    merged = len(node.value) - explicit  # flatten_mapping puts merged pairs first
-    out = MarkedMap()
-    out.line = node.start_mark.line + 1
-    explicit_keys: set[Any] = set()
-    for i, (key_node, value_node) in enumerate(node.value):
-        key = loader.construct_object(key_node, deep=True)
-        value = loader.construct_object(value_node, deep=True)
-        line = key_node.start_mark.line + 1
-        try:
-            hash(key)
-        except TypeError:
-            key = BadKey(_kind(key), line)
-        if i >= merged:  # a merged key is overridden by an explicit one, as YAML says
-            if key in explicit_keys:
-                out.duplicates.append((key, line))
-            explicit_keys.add(key)
-        out[key] = value
-        out.lines[key] = line
-    return out
-
-
-_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
 
 
 SERVER_FIELDS = {
@@ -228,16 +135,16 @@ class _Checker:
         self.errors.append(ConfigError(shorten(message, 300), file=self.file, line=line,
                                        key=shorten(key, 120)))
 
-    def block(self, parent: MarkedMap, key: str, path: str, fields: Mapping[str, Field],
+    def block(self, parent: LinedMap, key: str, path: str, fields: Mapping[str, Field],
               skip: set[str] | frozenset[str] = frozenset()) -> dict[str, Any]:
         """Check the mapping `parent[key]` against `fields`; returns values (defaults on error)."""
         raw = parent.get(key)
         line = parent.lines.get(key, parent.line)
         if raw is None:
-            raw = MarkedMap()
+            raw = LinedMap()
             raw.line = line
         if not isinstance(raw, dict):
-            self.err(path, line, f"expected a mapping, got {_kind(raw)}")
+            self.err(path, line, f"expected a mapping, got {kind_of(raw)}")
             return {k: f.default for k, f in fields.items() if not f.required}
         return self.values(raw, path, fields, skip)
 
@@ -255,14 +162,6 @@ class _Checker:
         return out
 
 
-def _kind(v: Any) -> str:
-    if v is None:
-        return "nothing"
-    for t, words in ((bool, "true/false"), (dict, "a mapping"), (list, "a list"),
-                     (str, "a string"), (int, "an integer"), (float, "a number")):
-        if isinstance(v, t):
-            return words
-    return type(v).__name__
 
 
 def load_config(path: str | Path) -> Config:
@@ -280,20 +179,9 @@ def check_config(path: str | Path) -> tuple[Config | None, list[ConfigError]]:
     module; `parse_config` (text, used by tests and tools) does not insist on modules."""
     name = str(path)
     try:
-        with Path(path).open("rb") as f:
-            data = f.read(MAX_FILE_BYTES + 1)
-    except OSError as exc:
-        return None, [ConfigError(f"cannot read: {exc.strerror or exc}", file=name)]
-    if len(data) > MAX_FILE_BYTES:
-        return None, [ConfigError(f"larger than {MAX_FILE_BYTES // 1024} KiB; a config file "
-                                  "is a few kB", file=name)]
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = data.count(b"\n", 0, exc.start) + 1
-        column = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
-        return None, [ConfigError(f"not UTF-8: byte 0x{data[exc.start]:02x} at column {column} "
-                                  "(save the file as UTF-8)", file=name, line=line)]
+        text = read_text(path, max_bytes=MAX_FILE_BYTES, what="a config file")
+    except YamlError as exc:
+        return None, [ConfigError(exc.problem, file=name, line=exc.line)]
     config, errors = parse_config(text, name)
     if errors or config is None:
         return config, errors
@@ -311,18 +199,10 @@ def _has_content(text: str) -> bool:
 
 def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, list[ConfigError]]:
     try:
-        root = yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
-    except yaml.YAMLError as exc:
-        return None, [_yaml_error(exc, text, name)]
-    except RecursionError:  # pragma: no cover - MAX_DEPTH keeps the composer far from it
-        return None, [ConfigError("not valid YAML: nested too deeply", file=name)]
+        root = parse_mapping(text, "a mapping of sections")
+    except YamlError as exc:
+        return None, [ConfigError(exc.problem, file=name, line=exc.line)]
     c = _Checker(name)
-    if root is None:
-        root = MarkedMap()
-        root.line = 1
-    if not isinstance(root, MarkedMap):
-        c.err("", 1, f"expected a mapping of sections at the top, got {_kind(root)}")
-        return None, c.errors
     _report_bad_keys(c, root)
     top = {"server", "watchdog", "scheduler", "buses", "modules", "recorder", "interlocks"}
     for k in root:
@@ -339,8 +219,6 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
     buses, bus_classes = _buses(c, root)
     modules_errors = len(c.errors)
     modules = _modules(c, root, buses, bus_classes)
-    from ramp.config.interlocks import check_interlocks  # it reads this module's marks
-
     interlocks = check_interlocks(root.get("interlocks"), root.lines.get("interlocks", 1),
                                   modules, c.err, modules_ok=len(c.errors) == modules_errors)
     if c.errors:
@@ -360,27 +238,12 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
     return cfg, []
 
 
-def _yaml_error(exc: yaml.YAMLError, text: str, name: str) -> ConfigError:
-    """`file:line: not valid YAML: problem`, for the parser's errors and the reader's (a NUL
-    byte or another character YAML refuses, which carry a position instead of a mark)."""
-    mark = getattr(exc, "problem_mark", None)
-    line = mark.line + 1 if mark is not None else 0
-    problem = getattr(exc, "problem", None)
-    position = getattr(exc, "position", None)
-    if isinstance(exc, yaml.reader.ReaderError) and isinstance(position, int):
-        line = text.count("\n", 0, position) + 1
-        problem = f"character #x{exc.character:04x} is not allowed in YAML" \
-            if isinstance(exc.character, int) else exc.reason
-    return ConfigError(f"not valid YAML: {shorten(str(problem or exc), 200)}", file=name,
-                       line=line)
-
-
-def _report_bad_keys(c: _Checker, root: MarkedMap) -> None:
+def _report_bad_keys(c: _Checker, root: LinedMap) -> None:
     """A list or a mapping used as a key: reported where it is, then left out."""
     stack: list[tuple[Any, str]] = [(root, "")]
     while stack:
         node, path = stack.pop()
-        if isinstance(node, MarkedMap):
+        if isinstance(node, LinedMap):
             for key in list(node):
                 where = f"{path}.{key}" if path else str(key)
                 if isinstance(key, BadKey):
@@ -393,10 +256,10 @@ def _report_bad_keys(c: _Checker, root: MarkedMap) -> None:
             stack.extend((v, f"{path}[{i}]") for i, v in enumerate(node))
 
 
-def _check_host(c: _Checker, root: MarkedMap, server: dict[str, Any]) -> None:
+def _check_host(c: _Checker, root: LinedMap, server: dict[str, Any]) -> None:
     host = server.get("host")
     raw = root.get("server")
-    line = raw.lines.get("host", raw.line) if isinstance(raw, MarkedMap) else 0
+    line = raw.lines.get("host", raw.line) if isinstance(raw, LinedMap) else 0
     if isinstance(host, str) and not valid_host(host):
         c.err("server.host", line, f"{shorten(repr(host), 60)} is not an IP address or host "
                                    "name (0.0.0.0 serves on every interface)")
@@ -418,15 +281,15 @@ def valid_host(host: str) -> bool:
     return all(_HOST_LABEL.fullmatch(label) for label in labels)
 
 
-def _lines(root: MarkedMap, section: str) -> dict[str, int]:
+def _lines(root: LinedMap, section: str) -> dict[str, int]:
     """Lines of a section's keys, for errors found at run time (`server.max_clients`)."""
     raw = root.get(section)
-    if not isinstance(raw, MarkedMap):
+    if not isinstance(raw, LinedMap):
         return {}
     return {f"{section}.{k}": line for k, line in raw.lines.items() if isinstance(k, str)}
 
 
-def _recorder(c: _Checker, root: MarkedMap, file: str) -> RecorderConfig | None:
+def _recorder(c: _Checker, root: LinedMap, file: str) -> RecorderConfig | None:
     """`recorder: {dir, max_mb, keep}`: absent (or null) is off. A relative `dir` is
     relative to the config file's directory, as a path in a file is read by whoever reads
     the file (systemd starts the service in another working directory)."""
@@ -434,7 +297,7 @@ def _recorder(c: _Checker, root: MarkedMap, file: str) -> RecorderConfig | None:
         return None
     values = c.block(root, "recorder", "recorder", RECORDER_FIELDS)
     raw = root["recorder"]
-    if not isinstance(raw, MarkedMap) or "dir" not in values:
+    if not isinstance(raw, LinedMap) or "dir" not in values:
         return None
     line = raw.lines.get("dir", raw.line)
     directory = values["dir"]
@@ -451,23 +314,23 @@ def _recorder(c: _Checker, root: MarkedMap, file: str) -> RecorderConfig | None:
         return None
 
 
-def _buses(c: _Checker, root: MarkedMap) -> tuple[dict[str, BusConfig], dict[str, type[Bus]]]:
+def _buses(c: _Checker, root: LinedMap) -> tuple[dict[str, BusConfig], dict[str, type[Bus]]]:
     out: dict[str, BusConfig] = {}
     classes: dict[str, type[Bus]] = {}
     ports: dict[str, str] = {}
     raw = root.get("buses")
     if raw is None:
         return out, classes
-    if not isinstance(raw, MarkedMap):
-        c.err("buses", root.lines.get("buses", 0), f"expected a mapping, got {_kind(raw)}")
+    if not isinstance(raw, LinedMap):
+        c.err("buses", root.lines.get("buses", 0), f"expected a mapping, got {kind_of(raw)}")
         return out, classes
     for dup, dline in raw.duplicates:
         c.err(f"buses.{dup}", dline, "bus given twice")
     for name, entry in raw.items():
         path = f"buses.{name}"
         line = raw.lines.get(name, raw.line)
-        if not isinstance(entry, MarkedMap):
-            c.err(path, line, f"expected a mapping with a driver, got {_kind(entry)}")
+        if not isinstance(entry, LinedMap):
+            c.err(path, line, f"expected a mapping with a driver, got {kind_of(entry)}")
             continue
         driver = entry.get("driver")
         if not isinstance(driver, str) or len(driver) > 64:
@@ -502,14 +365,14 @@ def _buses(c: _Checker, root: MarkedMap) -> tuple[dict[str, BusConfig], dict[str
     return out, classes
 
 
-def _modules(c: _Checker, root: MarkedMap, buses: dict[str, BusConfig],
+def _modules(c: _Checker, root: LinedMap, buses: dict[str, BusConfig],
              bus_classes: dict[str, type[Bus]]) -> dict[str, ModuleConfig]:
     out: dict[str, ModuleConfig] = {}
     raw = root.get("modules")
     if raw is None:
         return out
-    if not isinstance(raw, MarkedMap):
-        c.err("modules", root.lines.get("modules", 0), f"expected a mapping, got {_kind(raw)}")
+    if not isinstance(raw, LinedMap):
+        c.err("modules", root.lines.get("modules", 0), f"expected a mapping, got {kind_of(raw)}")
         return out
     used: dict[tuple[str, str, tuple[Any, ...]], str] = {}
     for name, entry in raw.items():
@@ -526,8 +389,8 @@ def _modules(c: _Checker, root: MarkedMap, buses: dict[str, BusConfig],
             c.err(path, line, "a module name is 1-32 letters (A-Z, a-z), digits or _, since "
                               "clients address it over MCP (base:base.get=())")
             continue
-        if not isinstance(entry, MarkedMap):
-            c.err(path, line, f"expected a mapping of devices, got {_kind(entry)}")
+        if not isinstance(entry, LinedMap):
+            c.err(path, line, f"expected a mapping of devices, got {kind_of(entry)}")
             continue
         type_name = entry.get("type", name)
         try:
@@ -542,7 +405,7 @@ def _modules(c: _Checker, root: MarkedMap, buses: dict[str, BusConfig],
 
 
 def _module(c: _Checker, path: str, name: str, type_name: str, cls: type[Module],
-            entry: MarkedMap, buses: dict[str, BusConfig], bus_classes: dict[str, type[Bus]],
+            entry: LinedMap, buses: dict[str, BusConfig], bus_classes: dict[str, type[Bus]],
             used: dict[tuple[str, str, tuple[Any, ...]], str]) -> ModuleConfig | None:
     devices: dict[str, DeviceConfig] = {}
     settings: dict[str, Mapping[str, Any]] = {}
@@ -564,8 +427,8 @@ def _module(c: _Checker, path: str, name: str, type_name: str, cls: type[Module]
             c.err(dpath, dline, f"missing; a {type_name} module needs a {spec.kind} device "
                                 f"`{dev}` ({spec.help or 'see the README'})")
             continue
-        if not isinstance(raw, MarkedMap):
-            c.err(dpath, dline, f"expected a mapping with a bus, got {_kind(raw)}")
+        if not isinstance(raw, LinedMap):
+            c.err(dpath, dline, f"expected a mapping with a bus, got {kind_of(raw)}")
             continue
         bus = raw.get("bus")
         if not isinstance(bus, str) or bus not in buses:

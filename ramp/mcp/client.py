@@ -13,6 +13,7 @@ from collections import deque
 from collections.abc import Iterable
 from types import TracebackType
 
+from ramp.common.hostport import parse_hostport
 from ramp.errors import ProtocolError
 from ramp.mcp.messages import Request, Response
 from ramp.mcp.protocol import parse_response_line
@@ -25,36 +26,10 @@ __all__ = ["DEFAULT_HOST", "DEFAULT_PORT", "MAX_RESPONSE_LINE", "McpClient", "er
 
 
 def parse_address(text: str | None, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
-    """`host:port`, `port`, `host`, `[v6]:port`, a bare IPv6 address or None -> (host, port).
-
-    Raises ValueError with a message fit for a command line.
-    """
-    if text is None or not text.strip():
-        return DEFAULT_HOST, default_port
-    text = text.strip()
-    host, port_text = text, ""
-    if text.startswith("["):
-        close = text.find("]")
-        if close < 0:
-            raise ValueError(f"bad address {text!r}: missing ']'")
-        host, rest = text[1:close], text[close + 1:]
-        if rest and not rest.startswith(":"):
-            raise ValueError(f"bad address {text!r}: expected ':' after ']'")
-        port_text = rest[1:]
-    elif text.isdigit():
-        host, port_text = DEFAULT_HOST, text
-    elif text.count(":") == 1:
-        host, port_text = text.split(":")
-    # More than one colon without brackets: a bare IPv6 address, on the default port.
-    if not host:
-        if text.startswith("["):
-            raise ValueError(f"bad address {text!r}: empty host in brackets")
-        host = DEFAULT_HOST
-    if not port_text:
-        return host, default_port
-    if not port_text.isdigit() or not 1 <= int(port_text) <= 65535:
-        raise ValueError(f"bad address {text!r}: port must be 1-65535")
-    return host, int(port_text)
+    """`host:port`, `port`, `host`, `[v6]:port`, a bare IPv6 address or None -> (host, port)
+    (`ramp.common.hostport`, defaulting to this machine and the MCP port); ValueError."""
+    return parse_hostport(text or "", default_host=DEFAULT_HOST, default_port=default_port,
+                          example=f"robot.local:{DEFAULT_PORT}")
 
 
 def errors(responses: Iterable[Response]) -> list[Response]:

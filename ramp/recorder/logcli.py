@@ -44,26 +44,16 @@ def _progress_flags(p: argparse.ArgumentParser) -> None:
     g.add_argument("--no-progress", dest="progress", action="store_false")
 
 
-def _missing(files: Sequence[Path]) -> int:
-    for f in files:
-        if not f.is_file():
-            print(f"ramp log: {f}: no such file", file=sys.stderr)
-            return 2
-    return 0
-
-
 def cmd_summary(args: argparse.Namespace) -> int:
-    from ramp.recorder.reading import NotMcap, Recording
+    from ramp.recorder.reading import BadRecording, Recording
     from ramp.recorder.summary import Summary, format_report
 
-    if _missing(args.files):
-        return 2
     rec = Recording(args.files, progress=args.progress)
     s = Summary()
     try:
         for msg in rec:
             s.add(msg)
-    except NotMcap as exc:
+    except BadRecording as exc:
         print(f"ramp log: {exc}", file=sys.stderr)
         return 2
     report = s.report(rec.files)
@@ -72,10 +62,8 @@ def cmd_summary(args: argparse.Namespace) -> int:
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    from ramp.recorder.reading import NotMcap, Recording
+    from ramp.recorder.reading import BadRecording, Recording
 
-    if _missing(args.files):
-        return 2
     try:
         import matplotlib  # noqa: F401
     except ImportError:
@@ -89,7 +77,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
     try:
         for msg in rec:
             data.add(msg)
-    except NotMcap as exc:
+    except BadRecording as exc:
         print(f"ramp log: {exc}", file=sys.stderr)
         return 2
     title = args.title if args.title is not None else ", ".join(f.name for f in args.files)

@@ -24,6 +24,8 @@ from typing import Any
 
 import yaml
 
+from ramp.common.yamlload import YamlError, compose, construct, read_text
+
 #: The standard mapping's 17 buttons and 4 axes (W3C Gamepad, "Remapping").
 BUTTON_COUNT = 17
 AXIS_COUNT = 4
@@ -199,7 +201,10 @@ class _Node:
     def scalar(self) -> Any:
         if not isinstance(self.node, yaml.ScalarNode):
             raise self.error("expected a single value")
-        return yaml.safe_load(yaml.serialize(self.node))
+        try:
+            return construct(self.node)
+        except YamlError as exc:
+            raise self.error(exc.problem, exc.line or None) from None
 
     def number(self, lo: float, hi: float, what: str = "a number") -> float:
         v = self.scalar()
@@ -315,12 +320,9 @@ def _keyboard(node: _Node) -> Keyboard:
 def parse_profile(text: str, file: str, name: str) -> Profile:
     """A profile from YAML text; ProfileError naming file:line and the key otherwise."""
     try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-    except yaml.MarkedYAMLError as exc:
-        line = exc.problem_mark.line + 1 if exc.problem_mark is not None else 0
-        raise ProfileError(f"not valid YAML: {exc.problem}", file=file, line=line) from exc
-    except yaml.YAMLError as exc:
-        raise ProfileError(f"not valid YAML: {exc}", file=file) from exc
+        root = compose(text)
+    except YamlError as exc:
+        raise ProfileError(exc.problem, file=file, line=exc.line) from None
     if root is None:
         raise ProfileError("the file is empty; expected a mapping with bindings", file=file,
                            line=1)
@@ -398,7 +400,7 @@ class ProfileLibrary:
             where = ", ".join(str(d) for d in self.dirs)
             raise ProfileError(f"no profile named {name!r} (known: {known}; looked in {where})")
         try:
-            text = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ProfileError(f"cannot read: {exc}", file=str(path)) from exc
+            text = read_text(path, what="a profile")
+        except YamlError as exc:
+            raise ProfileError(exc.problem, file=str(path), line=exc.line) from None
         return parse_profile(text, str(path), name)

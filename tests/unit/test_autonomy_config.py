@@ -73,7 +73,7 @@ def test_every_error_is_reported_at_once_with_file_line_and_key() -> None:
     assert errs == [
         "a.yaml:14: radar: unknown section (expected one of: backend, lidar, imu, gimbal, "
         "mission)",
-        "a.yaml:1: backend: 'robot' is not an address; expected HOST:PORT (for example "
+        "a.yaml:1: backend: 'robot': no port; expected HOST:PORT (for example "
         "192.168.1.10:5577)",
         "a.yaml:2: lidar.port: 70000 is not a TCP port (1-65535)",
         "a.yaml:4: imu.driver: 'xsens' is not an IMU driver (one of phidget, sim)",
@@ -180,7 +180,7 @@ def test_check_lists_every_error_and_fails(tmp_path: Path,
     bad.write_text("backend: x\nimu: {serial: -7}\n")
     assert main(["check", str(bad)]) == 1
     err = capsys.readouterr().err.splitlines()
-    assert err[0] == f"{bad}:1: backend: 'x' is not an address; expected HOST:PORT (for " \
+    assert err[0] == f"{bad}:1: backend: 'x': no port; expected HOST:PORT (for " \
                      "example 192.168.1.10:5577)"
     assert err[1].startswith(f"{bad}:2: imu.serial: -7 is not a Phidget serial number")
     assert err[-1] == f"ramp-autonomy: 2 error(s) in {bad}"

@@ -108,8 +108,7 @@ def test_a_refused_connect_backs_off_and_connects_once_the_backend_is_up(
     harness.advance(2.0)
     assert link.state == DISCONNECTED and "ECONNREFUSED" in link.fault
     assert 2 <= link.stats["connect_failures"] <= 3  # at 0, 0.5, 1.5 s: the back-off doubles
-    link.host, link.port = harness.sup.server.address
-    link._sockaddr = None  # the address changed: resolve again
+    link.client.set_address(*harness.sup.server.address)  # resolved again at the next try
     harness.advance(3.0)
     assert link.state == CONNECTED and len(connects) == 1
 

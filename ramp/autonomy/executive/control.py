@@ -37,5 +37,10 @@ class AcquireControl(Step):
             return Status.done(f"control acquired as {robot.owner_name}")
         return Status.running()
 
-    def _done(self) -> None:
-        self.acquired = True
+    def _done(self, ok: bool) -> None:
+        """An acquire answered without error is control held; one lost with the link or
+        refused is asked again (the state's time-out bounds the asking)."""
+        if ok:
+            self.acquired = True
+        else:
+            self.asked = False

@@ -85,16 +85,17 @@ class RobotLink:
         return None
 
     # -- commands ---------------------------------------------------------------------------
-    def send(self, request: str, on_done: Callable[[], None] | None = None) -> bool:
+    def send(self, request: str, on_done: Callable[[bool], None] | None = None) -> bool:
         """Send a command; its error answers are kept for `problem()`. False when the link
-        is down (then `problem()` says so too)."""
+        is down (then `problem()` says so too). `on_done(ok)` runs once it is settled: True
+        for an answer with no error, False for an error answer or a lost connection."""
         gen = self._gen
         self.sent += 1
 
         def answered(reply: Reply[Any]) -> None:
-            self._check(reply, gen, request)
+            ok = self._check(reply, gen, request)
             if on_done is not None:
-                on_done()
+                on_done(ok)
 
         if not self.link.send(request, answered):
             self._errors.append((gen, "fault", f"not connected: {self.link.fault or 'link down'}",
@@ -206,17 +207,19 @@ class RobotLink:
             if was_moving and self.on_trip is not None:
                 self.on_trip("the backend's watchdog tripped: every module stopped")
 
-    def _check(self, reply: Reply[Any], gen: int, request: str) -> None:
+    def _check(self, reply: Reply[Any], gen: int, request: str) -> bool:
+        """Keep the reply's errors; True when it has none."""
         if reply.error is not None:
             self._errors.append((gen, "fault", reply.error, request))
-            return
+            return False
         if not reply.line:
-            return
+            return True
         try:
             responses = reply.responses()
         except ProtocolError as exc:
             self._errors.append((gen, "fault", f"unreadable answer: {exc}", request))
-            return
+            return False
+        ok = True
         for r in responses:
             if r.prop != "error":
                 continue
@@ -225,9 +228,11 @@ class RobotLink:
             if gen != self._gen:
                 log.info("robot link: late error to %s: %s %s", request, code, detail)
             self._errors.append((gen, code, detail, request))
+            ok = False
             if code == "not_owner":
                 self.motion_stopped_by_others()
             elif code == "interlocked":
                 log.warning("robot link: %s refused by interlock %s", request,
                             detail.split(" ", 1)[0] or "?")
                 self.motion_stopped_by_others()
+        return ok

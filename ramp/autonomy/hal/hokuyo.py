@@ -26,19 +26,12 @@ A host name is resolved once in `start()`, which can block on DNS: give the sens
 from __future__ import annotations
 
 import argparse
-import contextlib
-import errno
-import ipaddress
 import logging
 import math
-import os
-import select
-import socket
 import sys
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Protocol
 
 import numpy as np
 
@@ -56,6 +49,9 @@ from ramp.autonomy.hal.lidar import (
     ScanGeometry,
 )
 from ramp.clock import Clock, MonotonicClock
+from ramp.common import tcpclient
+from ramp.common.hostport import parse_hostport
+from ramp.common.tcpclient import IoLoop, TcpClient
 from ramp.scheduler import Scheduler
 
 log = logging.getLogger("ramp.autonomy.hokuyo")
@@ -63,48 +59,13 @@ log = logging.getLogger("ramp.autonomy.hokuyo")
 DEFAULT_HOST = "192.168.0.10"
 DEFAULT_PORT = 10940
 DEFAULT_ADDRESS = f"{DEFAULT_HOST}:{DEFAULT_PORT}"
-READ_CHUNK = 65536
-READ_BUDGET = 1 << 18  # bytes read per call at most, so one busy socket cannot stall a tick
 MAX_BAD_IN_A_ROW = 5  # garbled replies in a row before the link is reset
-_IN_PROGRESS = {errno.EINPROGRESS, errno.EWOULDBLOCK, errno.EALREADY, errno.EINTR}
-
-
-class IoLoop(Protocol):
-    """What the driver needs from a loop (`ramp.scheduler.Scheduler` has it)."""
-
-    def add_reader(self, fd: int, callback: Callable[[], None]) -> None: ...
-
-    def remove_reader(self, fd: int) -> None: ...
-
-    def add_writer(self, fd: int, callback: Callable[[], None]) -> None: ...
-
-    def remove_writer(self, fd: int) -> None: ...
 
 
 def parse_address(text: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
-    """`host:port`, `host`, `[v6]:port` -> (host, port); ValueError with the reason."""
-    text = text.strip()
-    if not text:
-        raise ValueError("empty LIDAR address (expected HOST:PORT, e.g. 192.168.0.10:10940)")
-    if text.startswith("["):
-        host, sep, rest = text[1:].partition("]")
-        if not sep:
-            raise ValueError(f"{text!r}: unclosed '[' in an IPv6 address")
-        port_text = rest[1:] if rest.startswith(":") else ""
-        if rest and not rest.startswith(":"):
-            raise ValueError(f"{text!r}: expected [ADDRESS]:PORT")
-    elif text.count(":") == 1:
-        host, _, port_text = text.partition(":")
-    else:
-        host, port_text = text, ""
-    if not host:
-        raise ValueError(f"{text!r}: no host")
-    port = default_port
-    if port_text:
-        if not port_text.isdigit() or not 0 < int(port_text) < 65536:
-            raise ValueError(f"{text!r}: port must be 1-65535")
-        port = int(port_text)
-    return host, port
+    """`host:port`, `host`, `[v6]:port` -> (host, port) (`ramp.common.hostport`, the port
+    defaulting to SCIP's); ValueError with the reason."""
+    return parse_hostport(text, default_port=default_port, example=DEFAULT_ADDRESS)
 
 
 @dataclass
@@ -130,7 +91,7 @@ class HokuyoLidar(Lidar):
                  stream_timeout: float = 0.5, backoff_min: float = 0.5,
                  backoff_max: float = 8.0, fault_retry: float = 2.0) -> None:
         super().__init__(name)
-        self.host, self.port = parse_address(address)
+        host, port = parse_address(address)
         for label, value in (("connect_timeout", connect_timeout),
                              ("reply_timeout", reply_timeout),
                              ("stream_timeout", stream_timeout), ("backoff_min", backoff_min),
@@ -150,11 +111,8 @@ class HokuyoLidar(Lidar):
         self.last_step = last_step
         self.cluster = cluster
         self.expected_model = expected_model
-        self.connect_timeout = connect_timeout
         self.reply_timeout = reply_timeout
         self.stream_timeout = stream_timeout
-        self.backoff_min = backoff_min
-        self.backoff_max = backoff_max
         self.fault_retry = fault_retry
         #: What the sensor said about itself (VV and PP), once it has.
         self.version: scip.VersionInfo | None = None
@@ -163,16 +121,15 @@ class HokuyoLidar(Lidar):
         self.stats = {"connects": 0, "connect_failures": 0, "disconnects": 0, "scans": 0,
                       "bad_replies": 0, "drained": 0, "unexpected": 0, "timeouts": 0,
                       "sensor_faults": 0}
-        self._sock: socket.socket | None = None
-        self._sockaddr: tuple[int, tuple[object, ...]] | None = None
-        self._connecting = False
-        self._connect_deadline = math.inf
-        self._retry_at = 0.0
-        self._backoff = backoff_min
+        self.client = TcpClient(host, port, now=clock.now, loop=loop,
+                                connect_timeout=connect_timeout, backoff_min=backoff_min,
+                                backoff_max=backoff_max, on_connected=self._connected,
+                                on_data=self._on_data, on_lost=self._lost, on_eof=self._eof,
+                                connect_hint="is the sensor on this network?",
+                                stats=self.stats)
+        self._connection = 0  # counts losses: the rest of a read from a lost link is dropped
         self._fault_retry_at = math.inf
         self._decoder = scip.ScipDecoder()
-        self._out = bytearray()
-        self._writer_registered = False
         self._pending: deque[_Pending] = deque()
         self._draining = False  # after the connect-time QT: ignore all but its echo
         self._accept_stream = False  # our MD is running: its scans are ours
@@ -184,8 +141,7 @@ class HokuyoLidar(Lidar):
     # -- addresses and loop hooks ---------------------------------------------------------------
     @property
     def address(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"{host}:{self.port}"
+        return self.client.address
 
     @property
     def _who(self) -> str:
@@ -193,36 +149,26 @@ class HokuyoLidar(Lidar):
 
     def fileno(self) -> int:
         """The socket's descriptor, -1 when there is none (for loops that poll themselves)."""
-        return self._sock.fileno() if self._sock is not None else -1
+        return self.client.fileno()
 
     def on_readable(self) -> None:
         """Read what has arrived and act on every whole reply (call when `fileno()` is
         readable; never blocks)."""
-        sock = self._sock
-        if sock is None or self._connecting:
-            return
-        now = self.clock.now()
-        budget = READ_BUDGET
-        while budget > 0 and self._sock is sock:
-            try:
-                data = sock.recv(READ_CHUNK)
-            except (BlockingIOError, InterruptedError):
+        self.client.on_readable()
+
+    def _on_data(self, data: bytes, now: float) -> None:
+        connection = self._connection
+        for msg in self._decoder.feed(data):
+            if self._connection != connection:
                 return
-            except OSError as exc:
-                self._lost(now, f"connection failed: {exc.strerror or exc}")
-                return
-            if not data:
-                cut = self._decoder.close()
-                if cut is not None:
-                    self.stats["bad_replies"] += 1
-                    log.warning("%s: %s", self.name, cut)
-                self._lost(now, "connection closed by the sensor")
-                return
-            budget -= len(data)
-            for msg in self._decoder.feed(data):
-                if self._sock is not sock:
-                    return
-                self._handle(msg, now)
+            self._handle(msg, now)
+
+    def _eof(self, now: float) -> str:
+        cut = self._decoder.close()
+        if cut is not None:
+            self.stats["bad_replies"] += 1
+            log.warning("%s: %s", self.name, cut)
+        return "connection closed by the sensor"
 
     @property
     def pending_commands(self) -> int:
@@ -232,7 +178,7 @@ class HokuyoLidar(Lidar):
     def reboot(self) -> bool:
         """Reboot the sensor (RB twice within a second, as SCIP asks): it closes the link,
         boots, and the driver reconnects. False when there is no link to send it on."""
-        if self._sock is None or self._connecting or self.state in (STOPPED, CONNECTING):
+        if not self.client.connected or self.state in (STOPPED, CONNECTING):
             return False
         self._set_state(CONFIGURING)
         self._send_command(scip.rb(), "RB", self._after_first_rb)
@@ -252,56 +198,33 @@ class HokuyoLidar(Lidar):
 
     # -- lifecycle hooks -----------------------------------------------------------------------
     def _start(self) -> None:
-        try:
-            infos = socket.getaddrinfo(self.host, self.port, type=socket.SOCK_STREAM,
-                                       flags=_numeric_flags(self.host))
-        except OSError as exc:
-            self._drop(self.clock.now(), f"cannot resolve the host: {exc}")
-            return
-        family, _, _, _, sockaddr = infos[0]
-        self._sockaddr = (family, tuple(sockaddr))
-        self._connect(self.clock.now())
+        self.client.start()
 
     def _tick(self, now: float, dt: float) -> None:
-        if self._sockaddr is None:
-            if now >= self._retry_at:
-                self._set_state(STOPPED)
-                self.start()
+        self.client.tick(now)
+        if self.client.state == tcpclient.CONNECTING and self.state == DISCONNECTED:
+            self._set_state(CONNECTING)
+        if not self.client.connected:
             return
-        if self._sock is None:
-            if now >= self._retry_at:
-                self._connect(now)
-            return
-        if self._connecting:
-            self._check_connect(now)
-            return
-        self.on_readable()
-        if self._sock is None:
-            return
-        self._flush()
         if self._pending and now > self._pending[0].deadline:
             p = self._pending[0]
             self.stats["timeouts"] += 1
-            self._lost(now, f"no reply to {p.what} within {self._timeout_for(p.echo):.2f} s")
+            self._lost_link(now, f"no reply to {p.what} within {self._timeout_for(p.echo):.2f} s")
             return
         if (self.state == STREAMING and self._accept_stream
                 and now - self._last_scan_at > self.stream_timeout):
             self.stats["timeouts"] += 1
-            self._lost(now, f"no scan for {self.stream_timeout:.2f} s while streaming")
+            self._lost_link(now, f"no scan for {self.stream_timeout:.2f} s while streaming")
             return
         if self.state == FAULT and now >= self._fault_retry_at and not self._pending:
             self._fault_retry_at = math.inf
             self._begin_handshake(now)
 
     def _stop(self) -> None:
-        if self._sock is not None and not self._connecting and (
-                self._accept_stream or self.state in (READY, STREAMING)):
-            with contextlib.suppress(OSError):
-                self._sock.send(scip.qt())  # best effort: stop the stream, laser off
-        self._close_socket()
-        self._sockaddr = None
-        self._retry_at = 0.0
-        self._backoff = self.backoff_min
+        if self.client.connected and (self._accept_stream or self.state in (READY, STREAMING)):
+            self.client.write(scip.qt())  # best effort: stop the stream, laser off
+        self.client.close()
+        self._reset_protocol()
 
     # -- scans ----------------------------------------------------------------------------------
     def _request_scan(self) -> bool:
@@ -321,60 +244,7 @@ class HokuyoLidar(Lidar):
         self._send_command(scip.qt(), "QT (stop stream)", self._after_stream_qt)
 
     # -- connecting -----------------------------------------------------------------------------
-    def _connect(self, now: float) -> None:
-        self._close_socket()
-        assert self._sockaddr is not None
-        family, sockaddr = self._sockaddr
-        try:
-            sock = socket.socket(family, socket.SOCK_STREAM)
-        except OSError as exc:
-            self._connect_failed(now, f"cannot open a socket: {exc}")
-            return
-        sock.setblocking(False)
-        with contextlib.suppress(OSError):
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        err = sock.connect_ex(sockaddr)
-        self._sock = sock
-        self.stats["connects"] += 1
-        if err == 0:
-            self._connected(now)
-        elif err in _IN_PROGRESS:
-            self._connecting = True
-            self._connect_deadline = now + self.connect_timeout
-            self._set_state(CONNECTING)
-            self._want_writable()
-        else:
-            self._connect_failed(now, f"cannot connect: {_strerror(err)}")
-
-    def _check_connect(self, now: float) -> None:
-        sock = self._sock
-        assert sock is not None
-        try:
-            _, writable, _ = select.select([], [sock], [], 0)
-        except (OSError, ValueError):
-            writable = [sock]
-        if writable:
-            err = sock.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR)
-            if err == 0:
-                self._connecting = False
-                self._connected(now)
-            else:
-                self._connect_failed(now, f"cannot connect: {_strerror(err)}")
-        elif now >= self._connect_deadline:
-            self._connect_failed(now, f"connect timed out after {self.connect_timeout:.1f} s "
-                                 "(is the sensor on this network?)")
-
-    def _connect_failed(self, now: float, reason: str) -> None:
-        self.stats["connect_failures"] += 1
-        self._drop(now, reason)
-
     def _connected(self, now: float) -> None:
-        self._connecting = False
-        self._stop_writer()
-        sock = self._sock
-        assert sock is not None
-        if self.loop is not None:
-            self.loop.add_reader(sock.fileno(), self.on_readable)
         self._decoder.reset()
         self._unwrapper.reset()
         log.info("%s: connected to %s", self.name, self.address)
@@ -434,7 +304,7 @@ class HokuyoLidar(Lidar):
         if reply.status not in ("00", "02"):
             self._sensor_fault(now, "BM", reply)
             return
-        self._backoff = self.backoff_min
+        self.client.reset_backoff()  # a whole handshake: the sensor has proven itself
         self._set_state(READY, "")
         if self.streaming_wanted:
             self._start_stream()
@@ -523,13 +393,13 @@ class HokuyoLidar(Lidar):
         self._bad_in_a_row += 1
         log.warning("%s: dropped a bad reply: %s", self._who, msg)
         if self._bad_in_a_row >= MAX_BAD_IN_A_ROW:
-            self._lost(now, f"{self._bad_in_a_row} garbled replies in a row (last: {msg})")
+            self._lost_link(now, f"{self._bad_in_a_row} garbled replies in a row (last: {msg})")
             return
         if self._pending and msg.echo == self._pending[0].echo:
             p = self._pending.popleft()
             if p.echo.startswith("GD"):
                 return  # that scan is lost; the caller asks again
-            self._lost(now, f"bad reply to {p.what}: {msg}")
+            self._lost_link(now, f"bad reply to {p.what}: {msg}")
 
     def _publish_scan(self, reply: scip.Reply, now: float) -> None:
         geometry = self.geometry
@@ -570,87 +440,26 @@ class HokuyoLidar(Lidar):
         echo = line.rstrip(b"\n").decode("ascii")
         now = self.clock.now()
         self._pending.append(_Pending(echo, what, now + self._timeout_for(echo), on_reply))
-        self._out += line
-        self._flush()
-
-    def _flush(self) -> None:
-        sock = self._sock
-        if sock is None or self._connecting:
-            return
-        while self._out:
-            try:
-                n = sock.send(self._out)
-            except (BlockingIOError, InterruptedError):
-                break
-            except OSError as exc:
-                self._lost(self.clock.now(), f"sending failed: {exc.strerror or exc}")
-                return
-            del self._out[:n]
-        if self._out:
-            self._want_writable()
-        else:
-            self._stop_writer()
-
-    def _on_writable(self) -> None:
-        if self._connecting:
-            self._check_connect(self.clock.now())
-        else:
-            self._flush()
-
-    def _want_writable(self) -> None:
-        if self.loop is not None and self._sock is not None and not self._writer_registered:
-            self.loop.add_writer(self._sock.fileno(), self._on_writable)
-            self._writer_registered = True
-
-    def _stop_writer(self) -> None:
-        if self.loop is not None and self._sock is not None and self._writer_registered:
-            self.loop.remove_writer(self._sock.fileno())
-        self._writer_registered = False
+        self.client.write(line)
 
     # -- losing the link ------------------------------------------------------------------------
+    def _lost_link(self, now: float, reason: str) -> None:
+        self.client.drop(now, reason)
+
     def _lost(self, now: float, reason: str) -> None:
-        self.stats["disconnects"] += 1
-        self._drop(now, reason)
+        """The client has closed the socket (or a connect failed) and will retry."""
+        self._reset_protocol()
+        delay = self.client.retry_at - now
+        self._set_state(DISCONNECTED, f"{self._who}: {reason}; retrying in {delay:.2g} s")
 
-    def _drop(self, now: float, reason: str) -> None:
-        self._close_socket()
-        self._retry_at = now + self._backoff
-        self._set_state(DISCONNECTED, f"{self._who}: {reason}; retrying in {self._backoff:.2g} s")
-        self._backoff = min(self._backoff * 2, self.backoff_max)
-
-    def _close_socket(self) -> None:
-        sock = self._sock
-        self._sock = None
-        self._connecting = False
-        if sock is not None:
-            if self.loop is not None:
-                with contextlib.suppress(Exception):
-                    self.loop.remove_reader(sock.fileno())
-                if self._writer_registered:
-                    with contextlib.suppress(Exception):
-                        self.loop.remove_writer(sock.fileno())
-            with contextlib.suppress(OSError):
-                sock.close()
-        self._writer_registered = False
-        self._out.clear()
+    def _reset_protocol(self) -> None:
+        self._connection += 1
         self._pending.clear()
         self._draining = False
         self._accept_stream = False
         self._gd_after_bm = False
         self._fault_retry_at = math.inf
         self._decoder.reset()
-
-
-def _numeric_flags(host: str) -> int:
-    try:
-        ipaddress.ip_address(host)
-    except ValueError:
-        return 0
-    return socket.AI_NUMERICHOST
-
-
-def _strerror(err: int) -> str:
-    return f"{errno.errorcode.get(err, str(err))} ({os.strerror(err)})"
 
 
 # -- command line ---------------------------------------------------------------------------------

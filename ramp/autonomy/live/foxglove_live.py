@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
 from ramp.autonomy.live import protocol
+from ramp.common.hostport import format_hostport
 from ramp.errors import RampError
 from ramp.recorder.jsonbytes import json_payload
 
@@ -261,8 +262,7 @@ class FoxgloveLive:
     @property
     def url(self) -> str:
         """Where Foxglove connects: `ws://HOST:PORT`."""
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"ws://{host}:{self.port}"
+        return f"ws://{format_hostport(self.host, self.port)}"
 
     # -- figures ------------------------------------------------------------------------------
     @property
