@@ -101,10 +101,9 @@ def test_refuse_answers_interlocked_and_stops_what_runs_there(
     assert h.world.duty("ble.chain_left") == 0.0
     assert c.ask("ble:chain.vel=(60)") == \
         "ble:chain.error=(interlocked,chain_needs_ladder_down is active)"
-    assert c.ask("ble:chain.vel=(0)") == \
-        "ble:chain.error=(interlocked,chain_needs_ladder_down is active)"
-    # Stops are never refused; other motion of the module is not guarded.
-    assert c.ask("ble:ble.stop=()robot:robot.stop=()") == ""
+    # Stops are never refused (a speed of 0 is one); other motion of the module is not
+    # guarded.
+    assert c.ask("ble:chain.vel=(0)ble:ble.stop=()robot:robot.stop=()") == ""
     assert c.ask("ble:lift.vel=(10)") == ""
     assert active(c) == "chain_needs_ladder_down"
     # The order of SPEC 2: parameters and ownership are checked first.
@@ -153,6 +152,7 @@ def test_stop_stops_the_devices_within_one_tick_and_refuses_while_active(
     assert h.world.duty("base.lf_wheel") == 0.0
     assert c.ask("base:base.drive=(50,0)") == "base:base.error=(interlocked,bumper is active)"
     assert c.ask("base:rf_wheel.vel=(5)") == "base:rf_wheel.error=(interlocked,bumper is active)"
+    assert c.ask("base:base.drive=(0,45)base:rf_wheel.vel=(0)") == ""  # stops
     assert c.ask("base:base.stop=()") == ""
     assert c.ask("base:user_led.on=(1)") == ""  # not motion: never guarded
 

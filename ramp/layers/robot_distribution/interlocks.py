@@ -26,7 +26,8 @@ rules active while it is unreadable, and they release once it reads clear again.
 
 **Stopping a device** is the device's own speed function at 0 (`lift.vel=(0)` cancels a
 position move too; `base.drive=(0,...)` stops every wheel), or, for a device with no speed
-function, its module's `stop()`: the only stop every module has. Stops are never refused.
+function, its module's `stop()`: the only stop every module has. Stops are never refused,
+and neither is a speed function asked for 0 (`ble:chain.vel=(0)`), which is one.
 """
 
 from __future__ import annotations
@@ -122,7 +123,9 @@ def _neutral(p: Param) -> Any:
 
 # -- the running rules ----------------------------------------------------------------------
 
-REFUSE, LIMIT = 0, 1
+#: What a guard does to a request while its rule is active: refuse it, refuse it unless its
+#: speed is 0 (a stop), or clamp its speed.
+REFUSE, ZERO_ONLY, LIMIT = 0, 1, 2
 #: `Rule.evaluate`'s answers besides an unreadable property's index.
 HOLDS, CLEAR = -1, -2
 #: What a refusal says of a latched rule whose condition has cleared.
@@ -187,7 +190,7 @@ class Interlocks:
         self._prop_index: dict[str, int] = {}
         #: Per guarded function: the properties its rules read.
         self._guard_props: dict[tuple[str, str, str], tuple[int, ...]] = {}
-        #: (module, device, function) -> [(rule, REFUSE or LIMIT, lo, hi)]
+        #: (module, device, function) -> [(rule, REFUSE, ZERO_ONLY or LIMIT, lo, hi)]
         self.guards: dict[tuple[str, str, str], list[tuple[Rule, int, int, int]]] = {}
         #: Per module with a limit: the last motion function per device, and the last motion
         #: request's parameters (valid until another request on the module), see `ran`.
@@ -241,7 +244,9 @@ class Interlocks:
                     self._last_fn.setdefault(mod, {})
                     self._last_args.setdefault(mod, None)
                 else:
-                    self.guards.setdefault(key, []).append((rule, REFUSE, 0, 0))
+                    # A zero speed is a stop, and stops are never refused.
+                    effect = ZERO_ONLY if speed_param(fn) is not None else REFUSE
+                    self.guards.setdefault(key, []).append((rule, effect, 0, 0))
                     stop_devices[(mod, fn.device)] = None
         for mod, device in stop_devices:
             rule.stops.append((self.slots[mod], device))
@@ -413,7 +418,10 @@ class Interlocks:
                 stopped |= self.apply(rule, verdict, now)
             if not rule.active:
                 continue
-            if effect == REFUSE:
+            if effect == ZERO_ONLY:
+                if refusal is None and values[0] != 0:
+                    refusal = rule.refusal()
+            elif effect == REFUSE:
                 if refusal is None:
                     refusal = rule.refusal() if rule.spec.action != "limit" else (
                         f"{rule.name} limits {module}:{fn.device} and {fn.name} has no speed")
