@@ -125,6 +125,14 @@ interlocks:
     assert cfg.interlocks[0].patterns == (("ble:chain.vel", None),)
 
 
+def test_ramp_check_counts_the_rules_of_marte(capsys: pytest.CaptureFixture[str]) -> None:
+    from tests.harness import REPO
+
+    assert main(["check", str(REPO / "ramp.yaml")]) == 0
+    assert capsys.readouterr().out.strip().endswith(
+        "ramp.yaml: ok (5 buses, 2 modules: base, ble; 3 interlocks)")
+
+
 @pytest.mark.parametrize("command", ["check", "run"])
 def test_ramp_check_and_ramp_run_refuse_a_bad_rule_with_exit_2(
         command: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
