@@ -15,7 +15,8 @@ action on motion functions named by patterns (`MODULE:DEVICE.FUNCTION`, `*` with
 **When rules are evaluated.** Every tick, after the buses sampled their inputs and before any
 module's own work (`tick`), and again for the rules guarding a motion request as it arrives
 (`permit`), since a request earlier in the same message may have changed a reading. The
-cost is one read per property of each rule and one closure per comparison: it grows with
+cost is one read per property the rules use (once, however many rules read it) and one
+closure call per comparison, and nothing more for a rule that does not hold: it grows with
 the rules and nothing else. The reads are the modules' own get properties (`Property.read`),
 the values a get answer is formatted from, never a formatted answer.
 
