@@ -195,6 +195,8 @@ def _value_schema(value: Any) -> dict[str, Any]:
     kind = _KIND.get(type(value))
     if kind == "integer":
         return {"type": "number"}  # an int row may read as a float later (MCP's own typing)
+    if kind == "string":  # a row of names may hold several later (`interlock.active`)
+        return {"type": ["string", "array"], "items": {"type": "string"}}
     return {"type": kind} if kind else dict(_VALUE)
 
 
