@@ -266,6 +266,30 @@ def test_fail_closed_a_rule_whose_property_cannot_be_read_is_active(
     assert active(c) == "none"
 
 
+def test_a_jammed_lift_stops_the_base_through_its_latched_stall_row() -> None:
+    """`sim:lift.jam` stalls the lift; the BLE's own stall detection latches `lift.stalled`,
+    and a rule over that row stops the base until the fault is acknowledged."""
+    h = SimHarness(WIRING + """\
+interlocks:
+  - {name: lift_stalled, when: "ble:lift.stalled == 1", stop: ["base:*", "ble:chain.vel"]}
+""")
+    try:
+        c = h.connect()
+        assert c.ask("sim:lift.jam=(1)ble:lift.vel=(60)base:base.drive=(40,0)") == ""
+        for _ in range(30):  # the stall guard needs 1.5 s without progress
+            h.advance(0.1)
+            assert c.ask("") == ""
+            if active(c) == "lift_stalled":
+                break
+        assert active(c) == "lift_stalled"
+        assert value(c.ask("ble:ble.get=()"), "ble:lift.stalled") == "1"
+        assert wheels(c) == [0, 0, 0, 0]
+        assert c.ask("base:base.drive=(40,0)") == \
+            "base:base.error=(interlocked,lift_stalled is active)"
+    finally:
+        h.close()
+
+
 def test_activations_and_releases_are_flight_recorder_events(tmp_path: Path) -> None:
     from ramp.recorder import Recorder, RecorderConfig
     from ramp.recorder.reading import Recording
