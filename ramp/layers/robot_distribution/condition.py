@@ -113,8 +113,11 @@ Node = Compare | Not | All | AnyOf
 
 
 def _number(x: float) -> str:
-    """Shortest text that reads back as the same float (`0.2`, `30.0`, `1e-05`)."""
-    return repr(float(x))
+    """Shortest text that reads back as the same number (`0.2`, `30`, `1e-05`)."""
+    x = float(x)
+    if x.is_integer() and abs(x) < 1e15:
+        return str(int(x))
+    return repr(x)
 
 
 def properties(node: Node) -> list[str]:
