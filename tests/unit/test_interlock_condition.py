@@ -120,13 +120,13 @@ def _trees(children: Any) -> Any:
 TREES = st.recursive(_COMPARE, _trees, max_leaves=12)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=200, deadline=None)
 @given(TREES)
 def test_a_printed_condition_parses_back_to_the_same_tree(tree: Node) -> None:
     assert parse_condition(str(tree)) == tree
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(TREES, st.data())
 def test_the_compiled_predicate_agrees_with_the_tree(tree: Node, data: st.DataObject) -> None:
     props = properties(tree)
