@@ -70,9 +70,10 @@ def wheels(c: Client) -> list[int]:
 
 
 def lift_at(h: SimHarness, c: Client, pos: float) -> None:
-    """The lift's pot reads `pos` from the next tick on."""
+    """The lift's pot reads `pos` from the next tick on; a rule it clears is released 0.1 s
+    later."""
     assert c.ask(f"sim:input.set=(ble,lift_pot,{pos})") == ""
-    h.advance(0.02)
+    h.advance(0.12)
 
 
 def test_robot_get_and_describe_show_the_rules(h: SimHarness) -> None:
@@ -168,7 +169,7 @@ def test_a_latched_rule_stays_until_reset_and_reset_is_refused_while_it_holds(
         "robot:interlock.error=(interlocked,bumper: its condition still holds; reset once it "
         "has cleared)")
     assert c.ask("sim:input.clear=(base,r_button)") == ""
-    h.advance(0.05)
+    h.advance(0.15)
     assert active(c) == "bumper"  # latched: the button is free, the rule is not
     assert c.ask("base:base.drive=(20,0)") == \
         "base:base.error=(interlocked,bumper is latched until robot:interlock.reset)"
@@ -264,6 +265,24 @@ def test_fail_closed_a_rule_whose_property_cannot_be_read_is_active(
     h.advance(2.5)  # re-attached within about a second
     assert value(c.ask("robot:robot.get=()"), "robot:ble.state") == "ok"
     assert active(c) == "none"
+
+
+def test_a_rule_is_released_once_clear_for_a_tenth_of_a_second_so_it_never_flaps(
+        h: SimHarness, events: Events) -> None:
+    c = h.connect()
+    lift_at(h, c, 0.3)
+    for _ in range(20):  # the pot hovers about the threshold, tick after tick
+        assert c.ask("sim:input.set=(ble,lift_pot,0.51)") == ""
+        h.advance(0.01)
+        assert c.ask("sim:input.set=(ble,lift_pot,0.49)") == ""
+        h.advance(0.01)
+    assert [e for e in events.seen if e[0] == "chain_needs_ladder_down"] == [
+        ("chain_needs_ladder_down", True, "active: ble:lift.pos > 0.5")]
+    h.advance(0.05)
+    assert "chain_needs_ladder_down" in active(c)
+    h.advance(0.06)
+    assert "chain_needs_ladder_down" not in active(c)
+    assert events.seen[-1] == ("chain_needs_ladder_down", False, "released")
 
 
 def test_a_jammed_lift_stops_the_base_through_its_latched_stall_row() -> None:

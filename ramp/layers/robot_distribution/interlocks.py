@@ -20,6 +20,11 @@ closure call per comparison, and nothing more for a rule that does not hold: it 
 the rules and nothing else. The reads are the modules' own get properties (`Property.read`),
 the values a get answer is formatted from, never a formatted answer.
 
+**Release.** A rule becomes active in the tick (or request) its condition is seen true, and
+is released once the condition has been clear for `RELEASE_AFTER_S` (0.1 s): a reading that
+hovers at its threshold keeps the rule active instead of switching it 100 times a second
+(each switch logged, recorded, and stopping devices). Being active longer is the safe side.
+
 **Fail closed.** A rule whose property cannot be read (its module not `ok`, a reading MCP
 cannot carry, a reader that raised) counts as active. A latching rule latches only on its
 condition seen true: a module that is still attaching at boot, or is unplugged, holds its
@@ -127,6 +132,8 @@ def _neutral(p: Param) -> Any:
 #: What a guard does to a request while its rule is active: refuse it, refuse it unless its
 #: speed is 0 (a stop), or clamp its speed.
 REFUSE, ZERO_ONLY, LIMIT = 0, 1, 2
+#: A rule is released once its condition has been clear this long (s): ten ticks at 100 Hz.
+RELEASE_AFTER_S = 0.1
 #: `Rule.evaluate`'s answers besides an unreadable property's index.
 HOLDS, CLEAR = -1, -2
 #: What a refusal says of a latched rule whose condition has cleared.
@@ -159,6 +166,8 @@ class Rule:
         self.active = False
         self.latched = False
         self.why = ""
+        #: Clock time since which the condition has been clear (None while it holds).
+        self.clear_since: float | None = None
         #: Devices stopped when the rule becomes active: (slot, device).
         self.stops: list[tuple[Any, str]] = []
         self.limits: list[_Limit] = []
@@ -306,14 +315,21 @@ class Interlocks:
         devices were told to stop."""
         holds = verdict != CLEAR
         unreadable = self.props[verdict][0] if verdict >= 0 else ""
-        if holds and not unreadable and rule.spec.latch:
-            rule.latched = True
-        active = holds or rule.latched
+        if holds:
+            rule.clear_since = None
+            if rule.spec.latch and not unreadable:
+                rule.latched = True
+        elif rule.clear_since is None:
+            rule.clear_since = now
+        # Released only once clear for RELEASE_AFTER_S: a reading hovering at the threshold
+        # (a lift held at 0.5 against `> 0.5`) keeps the rule active instead of flapping.
+        active = holds or rule.latched or (
+            rule.active and now - rule.clear_since < RELEASE_AFTER_S)  # type: ignore[operator]
         was = rule.active
         rule.active = active
         if active:  # what a refusal says: why it is active now
             rule.why = (f"is active: {unreadable} cannot be read" if unreadable
-                        else "is active" if holds else LATCHED)
+                        else "is active" if holds or not rule.latched else LATCHED)
         if active == was:
             return False
         if not active:
@@ -465,6 +481,7 @@ class Interlocks:
         if verdict == HOLDS:
             return f"{name}: its condition still holds; reset once it has cleared"
         rule.latched = False
+        rule.clear_since = -math.inf  # acknowledged: released now
         log.info("interlock %s reset", name)
         self.update(rule, now)
         return None
