@@ -32,8 +32,10 @@ def test_renamed_modules_attach_and_answer_while_known_ones_still_move_the_model
         assert h.backplane.signals.plain.motors["digger.chain_left"] > 0.3
         h.world.place(2.0, 1.94, 0.0)
         # The chain stops first: with the ladder down and the chain running, MARTE's
-        # digging_creep interlock would hold the drive to a creep.
-        assert c.ask("digger:chain.vel=(0)base:base.drive=(100,0)") == ""
+        # digging_creep interlock holds the drive to a creep (until 0.1 s after it stops).
+        assert c.ask("digger:chain.vel=(0)") == ""
+        h.advance(0.2)
+        assert c.ask("base:base.drive=(100,0)") == ""
         for _ in range(10):
             h.advance(0.1)
             assert c.ask("") == ""
