@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak clean
+.PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak soak-safety clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -25,12 +25,16 @@ teleop: $(STAMP)
 	robot=$$!; trap 'kill $$robot 2>/dev/null; wait $$robot 2>/dev/null' EXIT; \
 	$(VENV)/bin/ramp-teleop --backend 127.0.0.1:$(ROBOT_PORT) --http-port $(TELEOP_PORT)
 
-# A whole RMC mission on the wall clock, with the operator console to watch it and take over
-# (control.acquire in the console, or `ramp-shell 127.0.0.1:5577`); Ctrl-C stops both.
+# A whole RMC mission on the wall clock, its live view, and the operator console wired to
+# both (SPEC 7.1): open the address it prints to watch the mission's state, map and alerts,
+# and take over from an alert; Ctrl-C stops both. The view also opens in Foxglove
+# (ws://127.0.0.1:$(VIEW_PORT)).
+VIEW_PORT ?= 8765
 mission: $(STAMP)
-	@$(VENV)/bin/ramp sim mission --realtime --port $(ROBOT_PORT) & \
+	@$(VENV)/bin/ramp sim mission --realtime --port $(ROBOT_PORT) --foxglove-port $(VIEW_PORT) & \
 	robot=$$!; trap 'kill $$robot 2>/dev/null; wait $$robot 2>/dev/null' EXIT; \
-	sleep 2; $(VENV)/bin/ramp-teleop --backend 127.0.0.1:$(ROBOT_PORT) --http-port $(TELEOP_PORT)
+	sleep 2; $(VENV)/bin/ramp-teleop --backend 127.0.0.1:$(ROBOT_PORT) \
+	  --autonomy 127.0.0.1:$(VIEW_PORT) --http-port $(TELEOP_PORT)
 
 # The issue's campaign: 40 seeded missions over both start boxes and all four headings.
 campaign: $(STAMP)
@@ -53,9 +57,15 @@ bench-quick: $(STAMP)
 fuzz: $(STAMP)
 	RAMP_FUZZ_EXAMPLES=20000 $(PY) -m pytest tests/fuzz -q
 
+# The model-based test of SPEC 2.2 (watchdog, latched faults) at length: `make test` runs 12.
+soak-safety: $(STAMP)
+	RAMP_SAFETY_EXAMPLES=400 $(PY) -m pytest tests/hil_sim/test_safety_model.py -q
+
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis .import_linter_cache
 
-# Refresh the README's console screenshot: the browser tests take it (docs/img/teleop.png).
+# Refresh the console's screenshots: the browser tests take them (docs/img/teleop.png,
+# docs/img/console-autonomy.png).
 screenshots: $(STAMP)
-	RAMP_UPDATE_DOCS=1 $(PY) -m pytest -q tests/hil_sim/test_teleop_browser.py
+	RAMP_UPDATE_DOCS=1 $(PY) -m pytest -q tests/hil_sim/test_teleop_browser.py \
+	  tests/hil_sim/test_console_autonomy_browser.py

@@ -21,6 +21,7 @@ AUTONOMY_SECTIONS: tuple[str, ...] = (
         "localizer",
         "perception",
         "mission",
+        "console_bandwidth",
     )
     if find_spec("ramp.autonomy") is not None else ())
 

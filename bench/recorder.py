@@ -18,7 +18,11 @@
    the writer falls behind, the queue fills and records are dropped. Tick lateness
    p50/p99/p99.9/max, overruns, CPU % of a core (all threads), records written and dropped.
    Both recording runs use a queue of `QUEUE_RECORDS` records (the default is 20,000), so
-   the slow disk fills it within the run.
+   the slow disk fills it within the run. A fourth process, `crowded dir`, records into a
+   directory already holding `CROWDED_FILES` files of earlier runs, with `keep: 1` and a
+   new file every `CROWDED_MAX_MB` MB: rotation and pruning must not show in the tick
+   (before the recorder kept its own list of files, each rotation listed the directory
+   twice and the tick ran 142 ms late).
 3. **`ramp run --sim` with and without `--record`**: three real supervisor processes
    (`bench.child supervisor`, the bench's observer keeping every tick's lateness and cost)
    run *at the same time* on the MARTE config while `SUP_CLIENTS` MCP clients per process
@@ -61,6 +65,10 @@ from bench.common import (
 RATE_HZ = 100.0
 SLOW_DISK_BPS = 4_000     # bytes/s: an SD card stalling on erase cycles, or worse
 QUEUE_RECORDS = 2_000     # 1.4 s of this traffic
+#: The crowded directory: files of earlier runs already there, the recorder keeping 1 and
+#: rotating every CROWDED_MAX_MB (about every 0.7 s at this traffic).
+CROWDED_FILES = 50_000
+CROWDED_MAX_MB = 0.1
 #: (tick run seconds, encode calls per kind, ramp run seconds) by profile
 PROFILE = {"full": (30.0, 20_000, 30.0), "quick": (4.0, 4_000, 4.0),
            "smoke": (0.6, 200, 0.6)}
@@ -212,9 +220,18 @@ def loop(args: argparse.Namespace) -> int:
         if args.mode == "slow":
             def opener(path: Path) -> IO[bytes]:
                 return SlowFile(path, SLOW_DISK_BPS)  # type: ignore[return-value]
-        rec = Recorder(RecorderConfig(args.dir), queue_records=QUEUE_RECORDS,
+        config = RecorderConfig(args.dir)
+        if args.mode == "crowded":
+            d = Path(args.dir)
+            d.mkdir(parents=True, exist_ok=True)
+            for i in range(1, args.files + 1):
+                (d / f"ramp-{i:06d}-20260101T000000Z.mcap").touch()
+            config = RecorderConfig(args.dir, max_mb=CROWDED_MAX_MB, keep=1)
+            # As `ramp run` does: its log on stderr, the first file opened by the writer.
+            logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s")
+        rec = Recorder(config, queue_records=QUEUE_RECORDS,
                        **({"opener": opener} if opener else {}))
-        rec.start(clock.now())
+        rec.start(clock.now(), wait_for_file=args.mode != "crowded")
     clients = [f"127.0.0.1:{41000 + k}" for k in range(4)]
     wheels = ("lf_wheel", "lb_wheel", "rf_wheel", "rb_wheel")
 
@@ -254,19 +271,22 @@ def loop(args: argparse.Namespace) -> int:
         t_close = time.monotonic()
         rec.close(timeout=2.0)
         out.update(written=rec.written, close_s=round(time.monotonic() - t_close, 2),
-                   dropped_after_close=rec.dropped)
+                   dropped_after_close=rec.dropped,
+                   files_left=sum(1 for _ in Path(args.dir).glob("ramp-*.mcap")))
     print(json.dumps(out), flush=True)
     return 0
 
 
 def tick_runs(workdir: Path, duration: float) -> dict[str, Any]:
     children = {}
+    crowded_files = CROWDED_FILES if duration >= 2 else 1_000  # the smoke run stays quick
     try:
-        for mode in ("off", "on", "slow"):
+        for mode in ("off", "on", "slow", "crowded"):
             d = workdir / f"rec-{mode}"
             children[mode] = Child(f"recorder-{mode}", [
                 PYTHON, "-m", "bench.recorder", "--mode", mode, "--dir", str(d),
-                "--duration", str(duration)], workdir, stdin=True)
+                "--duration", str(duration), "--files", str(crowded_files)], workdir,
+                stdin=True)
         for child in children.values():
             child.expect("ready", 30)
         for child in children.values():
@@ -276,18 +296,20 @@ def tick_runs(workdir: Path, duration: float) -> dict[str, Any]:
     finally:
         for child in children.values():
             child.kill()
-    off, on, slow = results["off"], results["on"], results["slow"]
+    off, on, slow, crowded = results["off"], results["on"], results["slow"], results["crowded"]
     files = sorted((workdir / "rec-on").glob("*.mcap"))
     out: dict[str, Any] = {"rate_hz": RATE_HZ, "duration_s": duration,
                            "records_per_s": round(on["written"] / on["elapsed_s"]),
                            "slow_disk_bytes_per_s": SLOW_DISK_BPS,
                            "queue_records": QUEUE_RECORDS}
-    for label, r in (("on", on), ("slow_disk", slow)):
+    for label, r in (("on", on), ("slow_disk", slow), ("crowded_dir", crowded)):
         out[label] = {"late_us": versus(r["late_us"], off["late_us"]),
                       "overruns": compare(r["overruns"], off["overruns"]),
                       "cpu_pct": compare(r["cpu_pct"], off["cpu_pct"]),
                       "ticks": r["ticks"], "written": r["written"], "dropped": r["dropped"],
                       "queued_at_end": r["queued_at_end"], "close_s": r["close_s"]}
+    out["crowded_dir"].update(files_before=crowded_files, keep=1, max_mb=CROWDED_MAX_MB,
+                              files_left=crowded["files_left"])
     out["on"]["file_bytes"] = sum(f.stat().st_size for f in files)
     out["on"]["bytes_per_record"] = round(out["on"]["file_bytes"] / max(1, on["written"]), 1)
     return out
@@ -390,9 +412,11 @@ def run(settings: Settings, workdir: Path) -> dict[str, Any]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m bench.recorder")
-    p.add_argument("--mode", choices=["off", "on", "slow"], required=True)
+    p.add_argument("--mode", choices=["off", "on", "slow", "crowded"], required=True)
     p.add_argument("--dir", required=True)
     p.add_argument("--duration", type=float, required=True)
+    p.add_argument("--files", type=int, default=CROWDED_FILES,
+                   help="files of earlier runs in the crowded directory")
     return loop(p.parse_args(argv))
 
 

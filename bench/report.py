@@ -213,8 +213,13 @@ def render(doc: dict[str, Any]) -> str:
                 f"Tick at {t['rate_hz']:g} Hz for {t['duration_s']:g} s with "
                 f"{t['records_per_s']:,} records/s; three processes at the same time, baseline: "
                 "the same loop with the recorder off.", "", HEAD]
+        crowded = t.get("crowded_dir")
         for key, label in (("on", "recorder on"),
-                           ("slow_disk", f"slow disk ({t['slow_disk_bytes_per_s']:,} B/s)")):
+                           ("slow_disk", f"slow disk ({t['slow_disk_bytes_per_s']:,} B/s)"),
+                           ("crowded_dir", f"{crowded['files_before']:,} files in the dir"
+                            if crowded else "")):
+            if key not in t:
+                continue
             r = t[key]
             out += _pcts(f"{label}: lateness", r["late_us"], " µs", ("p50", "p99", "max"))
             out += [_row(f"{label}: overruns", r["overruns"]),
@@ -224,6 +229,11 @@ def render(doc: dict[str, Any]) -> str:
                 f"{sd['written']:,} taken by the writer, the queue ({t['queue_records']:,} "
                 f"records) full at the end; recorder on: {t['on']['dropped']} dropped, "
                 f"{t['on']['bytes_per_record']} bytes per record on disk.", ""]
+        if crowded:
+            out += [f"Crowded directory ({crowded['files_before']:,} files of earlier runs, "
+                    f"keep {crowded['keep']}, a new file every {crowded['max_mb']:g} MB): "
+                    f"{crowded['dropped']:,} records dropped, {crowded['written']:,} written, "
+                    f"{crowded['files_left']} file left.", ""]
         rr = rc.get("ramp_run")
         if rr:
             on, sd = rr["on"], rr["slow_disk"]
@@ -318,6 +328,20 @@ def render(doc: dict[str, Any]) -> str:
                 f"{m['delivered_kg']} kg delivered, {m['collisions']} collisions, "
                 f"{m['crater_entries']} crater entries. Wall time by part: "
                 + ", ".join(f"{k} {v} %" for k, v in m["wall_pct_by_part"].items()) + ".", ""]
+    b = doc.get("console_bandwidth")
+    if b and "error" not in b:
+        out += [f"**console_bandwidth** (`ramp-teleop --autonomy` at its defaults on a realtime "
+                f"mission, seed {b['seed']}, {b['seconds']:g} s, each link through a counting "
+                "TCP proxy; budget: 16 kB/s for both together)", "",
+                "| link | bytes/s | up | down |", "|---|---|---|---|"]
+        for name, label in (("mcp", "MCP (status poll and commands)"),
+                            ("view", "autonomy's view")):
+            x = b[name]
+            out.append(f"| {label} | {_num(x['bps'])} | {_num(x['up_bps'])} | "
+                       f"{_num(x['down_bps'])} |")
+        out += [f"| **both** | **{_num(b['total_bps'])}** | | |", "",
+                f"Busiest second {_num(b['busiest_second_bps'])} B/s; the mission went "
+                f"through {', '.join(b['states'])}.", ""]
     return "\n".join(out)
 
 

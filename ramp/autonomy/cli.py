@@ -17,10 +17,13 @@ and hand control back. SIGINT or SIGTERM stop the robot (`robot:robot.stop=()`) 
 `--foxglove-port P` streams the autonomy's view live to Foxglove over its WebSocket protocol
 (`ramp.autonomy.live`: the mission state, the estimated pose, the numbers, the scans and the
 map, the channels `ramp sim mission --record` writes), on 127.0.0.1:P (0 picks a free port);
-it prints `ramp-autonomy: foxglove live on ws://HOST:PORT` once listening.
+it prints `ramp-autonomy: foxglove live on ws://HOST:PORT` once listening. Only clients with
+no Origin or a local one are served, and web pages of the origins given with
+`--foxglove-origin ORIGIN` (repeatable, e.g. `https://app.foxglove.dev`).
 
 `check` validates `autonomy.yaml` without touching any hardware, as `ramp check` validates
-`ramp.yaml` (exit 1 when it has errors, each as `file:line: key.path: what was expected`).
+`ramp.yaml` (exit 2 when it has errors, as `ramp check` does; each error is
+`file:line: key.path: what was expected`).
 """
 
 from __future__ import annotations
@@ -71,6 +74,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="stream the autonomy's view live to Foxglove (WebSocket, "
                              "foxglove.websocket.v1) on 127.0.0.1:P; 0 picks a free port, "
                              "printed (needs the `foxglove` extra)")
+    parser.add_argument("--foxglove-origin", action="append", default=[], metavar="ORIGIN",
+                        help="a web page's origin allowed to open the live view besides "
+                             "local ones (repeatable), e.g. https://app.foxglove.dev")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     check = sub.add_parser("check", help="validate an autonomy.yaml without touching hardware")
     check.add_argument("file", metavar="FILE", help="the autonomy config, e.g. autonomy.yaml")
@@ -96,7 +102,7 @@ def cmd_check(path: str) -> int:
         for err in errors:
             print(err, file=sys.stderr)
         print(f"ramp-autonomy: {len(errors)} error(s) in {path}", file=sys.stderr)
-        return 1
+        return 2
     print(f"{path}: ok")
     for line in summary(cfg):
         print(f"  {line}")
@@ -127,11 +133,13 @@ def cmd_run(args: argparse.Namespace) -> int:
             return 2
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    return run_on_robot(cfg, backend, start_box=args.start_box, foxglove_port=port)
+    return run_on_robot(cfg, backend, start_box=args.start_box, foxglove_port=port,
+                        foxglove_origins=args.foxglove_origin)
 
 
 def run_on_robot(cfg: AutonomyConfig, backend: tuple[str, int], *,
-                 start_box: str | None = None, foxglove_port: int | None = None) -> int:
+                 start_box: str | None = None, foxglove_port: int | None = None,
+                 foxglove_origins: Sequence[str] = ()) -> int:
     """The mission on real hardware, on the wall clock, until done or a signal."""
     from ramp.autonomy.executive.autonomy import Autonomy
     from ramp.autonomy.hal import driver_class
@@ -149,7 +157,8 @@ def run_on_robot(cfg: AutonomyConfig, backend: tuple[str, int], *,
     now = clock.now()
     live = None
     if foxglove_port is not None:  # before any device: a port in use changes nothing
-        live = FoxgloveLive(port=foxglove_port, name="ramp-autonomy", latched=LATCHED)
+        live = FoxgloveLive(port=foxglove_port, name="ramp-autonomy", latched=LATCHED,
+                            origins=foxglove_origins)
         try:
             live.start(now)
         except LiveViewError as exc:

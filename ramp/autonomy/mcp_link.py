@@ -40,7 +40,7 @@ from collections.abc import Callable, Iterable
 from ramp.clock import Clock
 from ramp.common import tcpclient
 from ramp.common.hostport import parse_hostport
-from ramp.common.tcpclient import IoLoop, TcpClient
+from ramp.common.tcpclient import IoLoop, TcpClient, check_seconds
 from ramp.errors import ProtocolError
 from ramp.mcp.messages import Request
 from ramp.mcp.session import McpSession, Reply
@@ -81,14 +81,9 @@ class McpLink:
                  backoff_max: float = 8.0,
                  on_connect: Callable[[McpLink], None] | None = None) -> None:
         host, port = parse_backend(address)
-        for label, value in (("reply_timeout", reply_timeout),
-                             ("connect_timeout", connect_timeout),
-                             ("backoff_min", backoff_min), ("backoff_max", backoff_max),
-                             ("heartbeat_s", 1.0 if heartbeat_s is None else heartbeat_s)):
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name}: {label} must be a positive number of seconds")
-        if backoff_max < backoff_min:
-            raise ValueError(f"{name}: backoff_max is smaller than backoff_min")
+        check_seconds(name, reply_timeout=reply_timeout, connect_timeout=connect_timeout,
+                      backoff_min=backoff_min, backoff_max=backoff_max,
+                      heartbeat_s=1.0 if heartbeat_s is None else heartbeat_s)
         self.clock = clock
         self.name = name
         self.reply_timeout = reply_timeout

@@ -59,6 +59,16 @@ class IoLoop(Protocol):
     def remove_writer(self, fd: int) -> None: ...
 
 
+def check_seconds(name: str, **seconds: float) -> None:
+    """Every timing given must be a positive number of seconds, and `backoff_max` (when
+    given) at least `backoff_min`; ValueError naming the owner and the setting."""
+    for label, value in seconds.items():
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{name}: {label} must be a positive number of seconds")
+    if seconds.get("backoff_max", math.inf) < seconds.get("backoff_min", 0.0):
+        raise ValueError(f"{name}: backoff_max is smaller than backoff_min")
+
+
 def _nothing(*_: object) -> None:
     return None
 

@@ -214,7 +214,10 @@ class Bus(ABC):
         with self.lock:
             ch.duty = duty
             if self.is_open:
-                self._motor_changed(ch)
+                try:
+                    self._motor_changed(ch)
+                except Exception as exc:  # noqa: BLE001 - a driver bug: this bus's fault
+                    self._driver_raised(exc, "a motor command")
         if self.on_command is not None:
             self.on_command(ch.label, duty)
 
@@ -223,9 +226,26 @@ class Bus(ABC):
         with self.lock:
             ch.state = on
             if self.is_open:
-                self._output_changed(ch)
+                try:
+                    self._output_changed(ch)
+                except Exception as exc:  # noqa: BLE001 - a driver bug: this bus's fault
+                    self._driver_raised(exc, "an output command")
         if self.on_command is not None:
             self.on_command(ch.label, float(on))
+
+    def _driver_raised(self, exc: Exception, where: str) -> None:
+        """A command hook raised (it should have set `failure`): the next `tick` faults the
+        bus, as for an I/O error; the traceback is logged once per bus."""
+        if self.failure is None:
+            self.failure = exc if isinstance(exc, DeviceError) else DeviceError(
+                self.name, f"driver error in {where}: {type(exc).__name__}: {exc}")
+        if not isinstance(exc, DeviceError) and not self._bug_logged:
+            self._bug_logged = True
+            logging.getLogger("ramp.hal").error(
+                "bus %s (%s): the driver raised on %s; the bus is faulted", self.name,
+                self.driver_name, where, exc_info=exc)
+
+    _bug_logged = False
 
     def _motor_changed(self, ch: MotorChannel) -> None:  # noqa: B027 - optional hook
         """Driver hook: `ch.duty` changed (bus open, lock held). Send it now or soon; an I/O

@@ -34,6 +34,9 @@ class AsyncMcpClient:
         self._loop = asyncio.get_running_loop()
         self.unsolicited: deque[Reply[Any]] = deque(maxlen=_KEEP_UNSOLICITED)
         self.close_reason = ""
+        #: Bytes written and read on this connection (an operator link's bandwidth).
+        self.bytes_out = 0
+        self.bytes_in = 0
         self._closed = asyncio.Event()
         self._task = asyncio.create_task(self._read_loop(), name=f"mcp-read {host}:{port}")
 
@@ -75,6 +78,7 @@ class AsyncMcpClient:
                                   + (f": {self.close_reason}" if self.close_reason else ""))
         future: asyncio.Future[Reply[Any]] = self._loop.create_future()
         data = self._session.send(message, future, self._loop.time())
+        self.bytes_out += len(data)
         try:
             self._writer.write(data)
         except (OSError, RuntimeError) as exc:
@@ -118,6 +122,7 @@ class AsyncMcpClient:
                 data = await self._reader.read(65536)
                 if not data:
                     break
+                self.bytes_in += len(data)
                 for reply in self._session.feed(data, self._loop.time()):
                     future = reply.tag
                     if future is None:

@@ -1,8 +1,9 @@
 """MARTE's Bucket Ladder Excavator module: the chain, the lift actuator and the bin's load cell.
 
-Requests and get rows are thesis tables 5.5 and 5.6 (SPEC 2.1) plus two extensions:
-`load.tare` (zero the load cell with the bin empty) and the get row `lift.stalled` (1 while
-the lift's stall fault is latched). YAML settings block `lift`: `tolerance` (hold band,
+Requests and get rows are thesis tables 5.5 and 5.6 (SPEC 2.1) plus three extensions:
+`load.tare` (zero the load cell with the bin empty), the get row `lift.stalled` (1 while
+the lift's stall fault is latched) and `lift.reset` (acknowledge it: nothing else clears it,
+SPEC 2.2). YAML settings block `lift`: `tolerance` (hold band,
 default 0.03), `hysteresis` (a move stops this close to its target, default 0.01),
 `stall_time` (s, default 1.5) and `stall_min_change` (least progress at full speed within
 `stall_time`, default 0.01); see ramp.layers.functional.thompson_actuator.
@@ -70,17 +71,12 @@ class BleModule(Module):
         self.prop(Property("lift", "pos", "float", lambda: self.lift.position))
         self.prop(Property("chain", "vel", "int", lambda: self.chain.velocity))
         self.prop(Property("load", "kg", "float", lambda: self.load.kg, "kg"))
-        self.prop(Property("lift", "stalled", "int", lambda: int(self.lift.stalled)))
+        self.latched("lift", self.lift.latch, "stalled")
 
     def stop(self) -> None:
         """Lift and chain to 0, any move cancelled (a latched lift stall stays latched)."""
         self.lift.stop()
         self.chain.stop()
-
-    def _stop_request(self) -> None:
-        """`ble:ble.stop=()` from an operator also clears a latched lift stall."""
-        self.stop()
-        self.lift.clear_fault()
 
     def is_moving(self) -> bool:
         return self.lift.is_moving() or self.chain.is_moving()

@@ -41,6 +41,9 @@ class RecorderConfig:
             raise ConfigError(exc.message, key=f"recorder.{exc.key}") from None
         if not checked["dir"].strip():
             raise ConfigError("'' is not a directory for the MCAP files", key="recorder.dir")
+        if "\x00" in checked["dir"]:  # no file system takes it: the writer could never open
+            raise ConfigError(f"{checked['dir']!r} holds a NUL byte; expected a directory path",
+                              key="recorder.dir")
         for key, value in checked.items():  # as checked: 5 -> 5.0 for max_mb, and so on
             object.__setattr__(self, key, value)
 

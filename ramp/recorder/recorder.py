@@ -173,8 +173,9 @@ class Recorder:
     # -- figures ------------------------------------------------------------------------------
     @property
     def dropped(self) -> int:
-        """Records lost: the queue was full (slow disk) or the disk refused them."""
-        io = self._thread.dropped_io if self._thread is not None else 0
+        """Records lost: the queue was full (slow disk), the disk refused them, or they went
+        into a file deleted under the recorder."""
+        io = self._thread.lost if self._thread is not None else 0
         return self._dropped_full + io
 
     @property

@@ -44,7 +44,7 @@ TOPIC_LOG = "/log"
 
 #: Event kinds the supervisor records (`Recorder.event`); `ramp log summary` counts them.
 EVENT_KINDS = {
-    "watchdog_trip": "the watchdog stopped every module (expiry or its feeder lost)",
+    "watchdog_trip": "the watchdog stopped every module (a commander silent or lost)",
     "watchdog": "the watchdog armed (motion) or went idle (nothing moving)",
     "control": "control acquired, released or taken over",
     "interlock": "an interlock rule became active (why) or was released",

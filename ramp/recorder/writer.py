@@ -17,6 +17,18 @@ The GIL: this thread's Python work (MCAP framing) holds the interpreter lock, an
 thread waking from `select` must wait for it. So the thread works in short slices
 (`SLICE_RECORDS`) with a real pause between them, and chunks stay small (mcap-python writes
 a chunk's message index in one Python loop); compression, checksums and writes run in C.
+The directory is scanned once, in slices (`SCAN_SLICE` entries), and the recorder keeps the
+list of its own files from then on: a rotation costs the same in a directory of 50,000 files
+as in an empty one, and old files are pruned between records, a few at a time
+(`PRUNE_SLICE`), with one log line per backlog, not one per file.
+
+What can go wrong is counted, never fatal: a record that cannot be written (a full disk, a
+directory that cannot be made) is counted in `dropped_io` and retried every `retry_s`, one
+warning per episode; any other exception is handled the same way (the thread never dies
+with records still coming). The file being written is checked on every timed flush: deleted
+or replaced under us (its path is gone, or names another inode), it is abandoned
+with a warning, the records written into it since the last check are counted as lost, and
+the next record starts a new file.
 """
 
 from __future__ import annotations
@@ -52,6 +64,10 @@ SLICE_RECORDS = 16       # records framed between two pauses: ~75 us of CPU, 0.9
 SLICE_PAUSE_S = 0.0002   # a real sleep, so a tick waiting for the interpreter lock gets it
 POLL_S = 0.05            # how often the thread looks at the queue when it is idle
 RETRY_S = 5.0            # after a write error, how long until a new file is tried
+SCAN_SLICE = 256         # directory entries looked at between two pauses (the first scan)
+PRUNE_SLICE = 16         # old files deleted between two pauses
+PRUNE_IN_DRAIN = 2       # ... and between two slices of records, when there is a backlog
+WARN_AGAIN_S = 60.0      # a write failure after this long without one warns again
 CHUNK_BYTES = 32 << 10   # a chunk is closed at this size (before compression), or on time
 RECORD_OVERHEAD = 47     # bytes of MCAP framing and message index per message (uncompressed)
 #: Every index, message indexes included: Foxglove's reader (@mcap/core) refuses a chunk
@@ -91,13 +107,27 @@ class TimeBase:
 
 def recording_files(directory: Path) -> list[tuple[int, Path]]:
     """The recorder's own files in `directory`, oldest first, as (index, path)."""
-    out = []
-    with contextlib.suppress(FileNotFoundError):
-        for p in directory.iterdir():
-            m = FILE_RE.match(p.name)
+    return [(i, directory / name) for i, name in recording_names(directory)]
+
+
+def recording_names(directory: Path, pause: Callable[[], None] | None = None
+                    ) -> list[tuple[int, str]]:
+    """The recorder's own files in `directory`, oldest first, as (index, file name);
+    `pause` is called every SCAN_SLICE entries (the writer thread sleeps there, so a tick
+    waiting for the interpreter lock gets it)."""
+    found: dict[int, str] = {}
+    with contextlib.suppress(FileNotFoundError, NotADirectoryError), os.scandir(directory) as it:
+        for n, entry in enumerate(it, 1):
+            m = FILE_RE.match(entry.name)
             if m:
-                out.append((int(m.group(1)), p))
-    return sorted(out)
+                found[int(m.group(1))] = entry.name
+            if pause is not None and n % SCAN_SLICE == 0:
+                pause()
+    return [(i, found[i]) for i in sorted(found)]
+
+
+def _pause() -> None:
+    time.sleep(SLICE_PAUSE_S)
 
 
 class SegmentWriter:
@@ -122,6 +152,13 @@ class SegmentWriter:
         self.path: Path | None = None
         self.files_opened = 0
         self.written = 0
+        #: Records written into a file that was deleted or replaced before they were safe.
+        self.lost = 0
+        self._ours: deque[tuple[int, str]] | None = None  # our files' names, oldest first
+        self._next_index = 1
+        self._identity: tuple[int, int] | None = None  # (st_dev, st_ino) of the open file
+        self._checked_written = 0
+        self._pruned: tuple[int, str, str] = (0, "", "")  # (count, first, last) not yet logged
         self._file: IO[bytes] | None = None
         self._mcap: Writer | None = None
         self._ids: dict[str, int] = {}
@@ -139,13 +176,27 @@ class SegmentWriter:
         return self._mcap is not None
 
     def open_next(self) -> Path:
-        """Start a new file (raises OSError); deletes the oldest beyond `keep`."""
+        """Start a new file (raises OSError); the oldest beyond `keep` are left to `prune`.
+
+        The directory is scanned for earlier files once, at the first open; from then on the
+        recorder keeps its own list."""
         self.directory.mkdir(parents=True, exist_ok=True)
-        existing = recording_files(self.directory)
-        index = existing[-1][0] + 1 if existing else 1
+        if self._ours is None:
+            existing = recording_names(self.directory, _pause)
+            self._ours = deque(existing)
+            self._next_index = existing[-1][0] + 1 if existing else 1
         stamp = dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%SZ")  # a label only
-        path = self.directory / f"ramp-{index:06d}-{stamp}.mcap"
-        f = self.opener(path)
+        for _ in range(100):  # a file of that name made by someone else: take the next index
+            index = self._next_index
+            self._next_index += 1
+            path = self.directory / f"ramp-{index:06d}-{stamp}.mcap"
+            try:
+                f = self.opener(path)
+                break
+            except FileExistsError:
+                continue
+        else:
+            raise FileExistsError(f"100 file names after ramp-{index - 99:06d} are taken")
         if isinstance(f, io.RawIOBase):  # buffer it here, so closing it flushes what mcap wrote
             f = io.BufferedWriter(f)
         try:
@@ -160,6 +211,8 @@ class SegmentWriter:
                 "file_index": str(index),
             })
             self._file, self._mcap, self.path = f, mcap, path
+            self._identity = _identity(f)
+            self._checked_written = self.written
             self._ids = {}
             for topic in list(self.channels):  # every known channel, even before its data
                 self._channel_id(topic)
@@ -172,7 +225,7 @@ class SegmentWriter:
                 path.unlink()  # a full disk must not fill the directory with empty files
             raise
         self.files_opened += 1
-        self._remove_old()
+        self._ours.append((index, path.name))
         return path
 
     def announce(self) -> None:
@@ -180,17 +233,63 @@ class SegmentWriter:
         log.info("recorder: writing %s (new file every %g MB, keeping %d)", self.path,
                  self.max_bytes / 1e6, self.keep)
 
-    def _remove_old(self) -> None:
-        files = recording_files(self.directory)
-        for _, old in files[:max(0, len(files) - self.keep)]:
-            if old == self.path:
-                continue
+    @property
+    def to_prune(self) -> int:
+        """Old files beyond `keep` still to delete."""
+        return max(0, len(self._ours) - self.keep) if self._ours is not None else 0
+
+    def prune(self, most: int = PRUNE_SLICE) -> int:
+        """Delete up to `most` of the oldest files beyond `keep`; returns how many were
+        looked at. One log line when the backlog is cleared, however long it was."""
+        ours = self._ours
+        done = 0
+        while ours is not None and len(ours) > self.keep and done < most:
+            index, name = ours.popleft()
+            done += 1
+            if self.path is not None and name == self.path.name:
+                ours.appendleft((index, name))  # never the file being written
+                break
+            old = self.directory / name
             try:
                 old.unlink()
-                log.info("recorder: removed %s (keeping the newest %d files)", old.name,
-                         self.keep)
+                n, first, _ = self._pruned
+                self._pruned = (n + 1, first or name, name)
+            except FileNotFoundError:
+                pass  # someone else removed it
             except OSError as exc:
                 log.warning("recorder: cannot remove %s: %s", old, exc.strerror or exc)
+        n, first, last = self._pruned
+        if n and self.to_prune == 0:
+            which = first if n == 1 else f"{n} files ({first} to {last})"
+            log.info("recorder: removed %s, keeping the newest %d", which, self.keep)
+            self._pruned = (0, "", "")
+        return done
+
+    def still_ours(self) -> bool:
+        """False when the open file's path is gone (deleted, or renamed away) or names
+        another inode (replaced, even by a directory); the records written into it since
+        the last check are then counted in `lost`."""
+        f, path, identity = self._file, self.path, self._identity
+        if f is None or path is None or identity is None:
+            return True
+        gone = ""
+        try:
+            st = os.stat(path)
+            if (st.st_dev, st.st_ino) != identity:
+                gone = "replaced"
+        except FileNotFoundError:
+            gone = "deleted"
+        except (OSError, ValueError, AttributeError):
+            return True  # not a real file (tests' openers), or cannot tell: keep writing
+        if not gone:
+            self._checked_written = self.written
+            return True
+        lost = self.written - self._checked_written
+        self.lost += lost
+        log.warning("recorder: %s was %s while being written; %d records in it are lost; "
+                    "starting a new file", path, gone, lost)
+        self.abandon()
+        return False
 
     def _channel_id(self, topic: str) -> int:
         cid = self._ids.get(topic)
@@ -257,10 +356,18 @@ class SegmentWriter:
     def abandon(self) -> None:
         """After a write error: close the file without its footer (it stays readable)."""
         f = self._file
-        self._mcap, self._file = None, None
+        self._mcap, self._file, self._identity = None, None, None
         if f is not None:
             with contextlib.suppress(OSError, ValueError):
                 f.close()
+
+
+def _identity(f: IO[bytes]) -> tuple[int, int] | None:
+    try:
+        st = os.fstat(f.fileno())
+    except (AttributeError, OSError, ValueError):
+        return None  # not a real file (tests)
+    return st.st_dev, st.st_ino
 
 
 def _sync(f: IO[bytes]) -> None:
@@ -286,13 +393,19 @@ class WriterThread(threading.Thread):
         self.retry_s = retry_s
         self.final_metadata = final_metadata
         self.bytes_out = 0     # payload bytes taken off the queue (the tick side counts in)
-        self.dropped_io = 0    # records lost to write errors
-        self.failed_at: float | None = None
+        self.dropped_io = 0    # records lost to write errors (and a deleted file's, below)
+        self.failed_at: float | None = None  # the failure the current retry waits after
+        self._last_failure: float | None = None
         self._stop_event = threading.Event()
         self._last_flush = 0.0
 
     def stop(self) -> None:
         self._stop_event.set()
+
+    @property
+    def lost(self) -> int:
+        """Every record taken off the queue and not safely in a file."""
+        return self.dropped_io + self.segments.lost
 
     def run(self) -> None:
         self._last_flush = time.monotonic()
@@ -300,12 +413,21 @@ class WriterThread(threading.Thread):
             self._reopen()  # the recorder left the first file to this thread
         while True:
             stopping = self._stop_event.is_set()
-            self._drain()
-            if stopping or time.monotonic() - self._last_flush >= self.flush_s:
-                self._flush()
-            if stopping and not self.queue:
+            pruning = False
+            try:
+                self._drain()
+                if stopping or time.monotonic() - self._last_flush >= self.flush_s:
+                    self._flush()
+                pruning = self.segments.to_prune > 0
+                if pruning:
+                    self.segments.prune()  # a few at a time, between drains
+                    time.sleep(SLICE_PAUSE_S)
+            except Exception as exc:  # noqa: BLE001 - a bug here must not end the recording
+                log.exception("recorder: unexpected error in the writer; going on")
+                self._failed(exc)
+            if stopping and not self.queue and not pruning:
                 break
-            if not stopping:
+            if not stopping and not pruning:
                 self._stop_event.wait(POLL_S)
         final = dict(self.final_metadata()) if self.final_metadata else {}
         self._guarded(lambda: self.segments.finish(final))
@@ -313,6 +435,7 @@ class WriterThread(threading.Thread):
     def _flush(self) -> None:
         self._guarded(self.segments.flush)
         self._last_flush = time.monotonic()
+        self._guarded(self.segments.still_ours)
 
     def _drain(self) -> None:
         """Everything queued, in slices; a chunk is closed on time even under a flood."""
@@ -327,7 +450,7 @@ class WriterThread(threading.Thread):
                 continue
             try:
                 seg.write(topic, t, payload)
-            except (OSError, ValueError) as exc:
+            except Exception as exc:  # noqa: BLE001 - counted and retried, whatever it is
                 self.dropped_io += 1
                 self._failed(exc)
                 continue
@@ -335,6 +458,8 @@ class WriterThread(threading.Thread):
             if n % SLICE_RECORDS == 0:
                 if time.monotonic() - self._last_flush >= self.flush_s:
                     self._flush()
+                if seg.to_prune:  # under a flood the queue never empties: prune as we go
+                    seg.prune(PRUNE_IN_DRAIN)
                 time.sleep(SLICE_PAUSE_S)
 
     def _reopen(self) -> bool:
@@ -342,7 +467,7 @@ class WriterThread(threading.Thread):
             return False
         try:
             path = self.segments.open_next()
-        except OSError as exc:
+        except Exception as exc:  # noqa: BLE001 - a NUL in a path is a ValueError, say
             self._failed(exc)
             return False
         if self.failed_at is not None:
@@ -355,12 +480,15 @@ class WriterThread(threading.Thread):
     def _guarded(self, action: Callable[[], Any]) -> None:
         try:
             action()
-        except (OSError, ValueError) as exc:
+        except Exception as exc:  # noqa: BLE001 - counted and retried, whatever it is
             self._failed(exc)
 
     def _failed(self, exc: Exception) -> None:
-        first = self.failed_at is None
-        self.failed_at = time.monotonic()
+        now = time.monotonic()
+        # One warning per episode: a failure within WARN_AGAIN_S of the last one belongs to
+        # it, even when a new file opened in between (a disk still full takes the header).
+        first = self._last_failure is None or now - self._last_failure >= WARN_AGAIN_S
+        self.failed_at = self._last_failure = now
         path = self.segments.path
         self.segments.abandon()
         if first:

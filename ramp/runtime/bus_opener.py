@@ -48,6 +48,8 @@ class BusOpener:
     def __init__(self, inline: bool) -> None:
         self.inline = inline
         self._attempts: dict[str, _Attempt] = {}
+        #: Driver bugs in `open` already logged with their traceback: (bus, type, message).
+        self._bugs: set[tuple[str, str, str]] = set()
 
     def busy(self, name: str) -> bool:
         """An open of this bus is in flight: nobody else may touch the bus."""
@@ -61,12 +63,12 @@ class BusOpener:
         """Start opening (or look at the open in flight): None when it succeeded, the error
         when it failed, False while it is still running."""
         if self.inline:
-            return _open(bus, now)
+            return _open(bus, now, self._bugs)
         attempt = self._attempts.get(name)
         if attempt is None:
             attempt = _Attempt(bus, now)
             self._attempts[name] = attempt
-            threading.Thread(target=self._run, args=(attempt, now), daemon=True,
+            threading.Thread(target=self._run, args=(attempt, now, self._bugs), daemon=True,
                              name=f"ramp-open-{name}").start()
             attempt.done.wait(WAIT_S)
         if not attempt.done.is_set():
@@ -85,21 +87,31 @@ class BusOpener:
             attempt.cancelled = True
 
     @staticmethod
-    def _run(attempt: _Attempt, now: float) -> None:
-        attempt.error = _open(attempt.bus, now)
+    def _run(attempt: _Attempt, now: float, bugs: set[tuple[str, str, str]]) -> None:
+        attempt.error = _open(attempt.bus, now, bugs)
         if attempt.cancelled and attempt.error is None:
             attempt.bus.close()
         attempt.done.set()
 
 
-def _open(bus: Bus, now: float) -> DeviceError | None:
+def _open(bus: Bus, now: float, bugs: set[tuple[str, str, str]]) -> DeviceError | None:
     try:
         bus.open(now)
     except DeviceError as exc:
-        bus.close()
+        _close(bus)
         return exc
     except Exception as exc:  # noqa: BLE001 - a driver bug must not kill the loop or thread
-        log.exception("bus %s (%s): open raised", bus.name, bus.driver_name)
-        bus.close()
+        key = (bus.name, type(exc).__name__, str(exc))
+        if key not in bugs:  # the traceback once, not at every retry
+            bugs.add(key)
+            log.exception("bus %s (%s): open raised", bus.name, bus.driver_name)
+        _close(bus)
         return DeviceError(bus.name, f"open failed: {type(exc).__name__}: {exc}")
     return None
+
+
+def _close(bus: Bus) -> None:
+    try:
+        bus.close()
+    except Exception:  # noqa: BLE001 - a closing bug must not hide why the open failed
+        log.debug("bus %s: close after a failed open raised", bus.name, exc_info=True)

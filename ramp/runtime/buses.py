@@ -6,6 +6,11 @@ finds its descriptor readable), the bus is closed and retried about once a secon
 module registry faults every module that uses it (`ramp.layers.robot_distribution.registry`:
 entering `fault` stops the module and logs). A request never sees an I/O error.
 
+**A bug in one driver is one bus's fault** (SPEC 2.2). Any other exception out of a driver
+(its tick, its input handler, its readiness, its close) takes the same route: that bus is
+faulted and retried, the rest keep ticking and serving. Its traceback is logged once per
+bus and bug, not at every tick or retry; a repeat after a reopen is one quiet line.
+
 A bus with a descriptor (`Bus.fileno()`: a serial port, a CAN socket) is watched by the loop
 while it is open, so a hang-up or input is handled the moment it happens instead of being
 polled for every tick.
@@ -15,7 +20,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from ramp.errors import DeviceError
 from ramp.hal.interfaces import Bus
@@ -37,6 +42,8 @@ class BusHealth:
     reason: str = "not opened yet"
     next_retry: float = 0.0
     faults: int = 0
+    #: Driver bugs already logged with their traceback: (exception type, message).
+    bugs: set[tuple[str, str]] = field(default_factory=set)
 
 
 class BusManager:
@@ -103,6 +110,8 @@ class BusManager:
                 bus.tick(now, dt)
             except DeviceError as exc:
                 self.fault(name, exc, now)
+            except Exception as exc:  # noqa: BLE001 - a driver bug: this bus's fault only
+                self.driver_bug(name, exc, "tick", now)
         if self._waiting:
             self._refresh(now)
 
@@ -116,16 +125,36 @@ class BusManager:
         self._refresh(now)
 
     # -- faults -------------------------------------------------------------------------------
-    def fault(self, name: str, exc: DeviceError, now: float) -> None:
+    def driver_bug(self, name: str, exc: Exception, where: str, now: float) -> None:
+        """An unexpected exception out of bus `name`'s driver: its traceback once, then the
+        device-fault route (the bus closes, is retried, its modules fault)."""
+        bus = self.buses[name]
+        key = (type(exc).__name__, str(exc))
+        health = self.health[name]
+        detail = f"driver error in {where}: {key[0]}: {key[1]}".rstrip(": ")
+        if key not in health.bugs:
+            health.bugs.add(key)
+            log.error("bus %s (%s): the driver raised in %s; the bus is faulted and retried, "
+                      "the other buses keep running", name, bus.driver_name, where,
+                      exc_info=exc)
+            self.fault(name, DeviceError(name, detail), now)
+        else:
+            self.fault(name, DeviceError(name, detail), now, quiet=True)
+
+    def fault(self, name: str, exc: DeviceError, now: float, quiet: bool = False) -> None:
         """The one route of a device fault: close the bus, retry later, let the registry
-        fault its modules."""
+        fault its modules. `quiet`: a repeat already reported (logged at debug level)."""
         health = self.health[name]
         health.faults += 1
         health.reason = exc.detail
         health.next_retry = now + RETRY_PERIOD
-        log.error("bus %s fault: %s", name, exc.detail)
+        log.log(logging.DEBUG if quiet else logging.ERROR, "bus %s fault: %s", name, exc.detail)
         self._unwatch(name)
-        self.buses[name].close()
+        try:
+            self.buses[name].close()
+        except Exception as bug:  # noqa: BLE001 - a closing bug must not stop the fault
+            if not quiet:
+                log.error("bus %s: the driver raised while closing", name, exc_info=bug)
         if self.on_fault is not None:
             self.on_fault(name, exc.detail, now)
         self._refresh(now)
@@ -156,8 +185,13 @@ class BusManager:
     def _refresh(self, now: float, force: bool = False) -> None:
         """Tell the registry when a bus's readiness changed (boards attach, buses fail)."""
         changed = force
+        buggy: list[tuple[str, Exception]] = []
         for name, bus in self.buses.items():
-            ready = bus.ready()
+            try:
+                ready = bus.is_open and bus.ready()
+            except Exception as bug:  # noqa: BLE001 - a driver bug: faulted below
+                ready = False
+                buggy.append((name, bug))
             if ready != self._ready[name]:
                 self._ready[name] = ready
                 changed = True
@@ -167,6 +201,8 @@ class BusManager:
         self._waiting = any(b.is_open and not self._ready[n] for n, b in self.buses.items())
         if changed:
             self._on_change(now)
+        for name, raised in buggy:
+            self.driver_bug(name, raised, "ready", now)
 
     def _try_open(self, name: str, bus: Bus, now: float) -> bool:
         """Open a bus without holding the loop (see `ramp.runtime.bus_opener`); True once it
@@ -198,7 +234,12 @@ class BusManager:
 
     def _watch(self, name: str, bus: Bus) -> None:
         """Wait on the bus's descriptor in the loop while it is open."""
-        fd = bus.fileno()
+        try:
+            fd = bus.fileno()
+        except Exception:  # noqa: BLE001 - a driver bug: no descriptor, ticks still run
+            log.exception("bus %s (%s): fileno raised; its input is polled in its tick",
+                          name, bus.driver_name)
+            fd = None
         if fd is None:
             return
         self._watched[name] = fd
@@ -213,6 +254,10 @@ class BusManager:
 
     def _drain(self, name: str, bus: Bus) -> None:
         now = self.clock.now()
-        bus.drain(now)
+        try:
+            bus.drain(now)
+        except Exception as exc:  # noqa: BLE001 - a driver bug: this bus's fault only
+            self.driver_bug(name, exc, "input", now)
+            return
         if bus.failure is not None:
             self.fault(name, bus.failure, now)

@@ -15,7 +15,7 @@ The points (method, when, and the layer hook it is connected to):
 - `module_state(t, module, state, reason)`: a module attached, or faulted (its motion
   stopped); `ModuleSlot.on_change`.
 - `watchdog(t, state, why)`: the watchdog armed, disarmed, tripped (`why`: motion, expired,
-  feeder lost, tick loop stalled ...); `Watchdog.on_change`.
+  commander lost, tick loop stalled ...); `Watchdog.on_change`.
 - `control(t, owner, peer)`: control acquired, released, taken over;
   `RobotDistribution.on_control`.
 - `interlock(t, name, active, why)`: an interlock rule became active (or released);

@@ -24,7 +24,7 @@ from ramp.layers.robot_distribution import (
 )
 from ramp.layers.server import McpServer
 from ramp.mcp.messages import Response
-from ramp.runtime.buses import BusManager
+from ramp.runtime.buses import RETRY_PERIOD, BusManager
 from ramp.runtime.observers import Observer
 from ramp.runtime.stall_guard import StallGuard
 from ramp.scheduler import Scheduler
@@ -105,6 +105,7 @@ class Supervisor:
             sched.add_task("interlocks", sched.rate_hz, interlocks.tick)
             interlocks.tick(now, 0.0)  # what the first client sees is already evaluated
         sched.add_task("hotplug", self._divisor_rate(1.0), self.bus_manager.retry)
+        sched.add_task("modules.retry", self._divisor_rate(1.0), self._retry_modules)
         for slot in self.slots.values():
             for task in slot.module.tasks():
                 rate = self._divisor_rate(task.rate_hz)
@@ -112,7 +113,7 @@ class Supervisor:
                     log.info("task %s.%s runs at %g Hz (asked %g Hz; base rate %g Hz)",
                              slot.name, task.name, rate, task.rate_hz, sched.rate_hz)
                 sched.add_task(f"{slot.name}.{task.name}", rate,
-                               _only_attached(slot, task.run))
+                               self._module_task(slot, task.name, task.run))
         self.server.start()
         self.running = True
         if self.observer is not None:
@@ -195,16 +196,44 @@ class Supervisor:
         if not self.robot.any_moving():
             self.robot.watchdog.disarm(now)
 
+    # -- a module's task raising: that module's fault (SPEC 2.2) ----------------------------
+    def _module_task(self, slot: ModuleSlot, name: str,
+                     run: Callable[[float, float], None]) -> Callable[[float, float], None]:
+        """Run only while the module is attached; an exception faults that module alone."""
+        def task(now: float, dt: float) -> None:
+            if slot.state == "ok":
+                try:
+                    run(now, dt)
+                except Exception as exc:  # noqa: BLE001 - one module's bug, not the loop's
+                    self.module_bug(slot, name, exc, now)
+        return task
+
+    def module_bug(self, slot: ModuleSlot, task: str, exc: Exception, now: float) -> None:
+        """A module's task raised: the module goes to `fault` (its motion stopped), the
+        traceback is logged once per bug, and it is attached again after RETRY_PERIOD, as a
+        bus is retried; the rest of the robot keeps running."""
+        key = (task, type(exc).__name__, str(exc))
+        if key not in slot.bugs:
+            slot.bugs.add(key)
+            log.error("module %s: task %s raised; the module is faulted and retried every "
+                      "%.0f s, the rest keep running", slot.name, task, RETRY_PERIOD,
+                      exc_info=exc)
+        slot.retry_at = now + RETRY_PERIOD
+        self.robot.changes += 1
+        slot.fail(now, f"task {task} raised {type(exc).__name__}: {exc}".rstrip(": "))
+        if not self.robot.any_moving():
+            self.robot.watchdog.disarm(now)
+
+    def _retry_modules(self, now: float, dt: float) -> None:
+        """About once a second: attach again a module whose task raised, once its wait is
+        over (its buses permitting)."""
+        if any(s.state != "ok" and s.retry_at and now >= s.retry_at
+               for s in self.slots.values()):
+            self.buses_changed(now)
+
     def _divisor_rate(self, wanted_hz: float) -> float:
         """The rate nearest `wanted_hz` that divides the base rate (at most the base rate)."""
         divisor = max(1, round(self.scheduler.rate_hz / wanted_hz))
         return self.scheduler.rate_hz / divisor
 
-
-def _only_attached(slot: ModuleSlot,
-                   run: Callable[[float, float], None]) -> Callable[[float, float], None]:
-    def task(now: float, dt: float) -> None:
-        if slot.state == "ok":
-            run(now, dt)
-    return task
 

@@ -40,6 +40,8 @@ from dataclasses import dataclass
 from multiprocessing import get_context
 from typing import Any
 
+from ramp.common.hostport import parse_hostport
+
 DEFAULT_MISSION = "ramp.simulation.mission:run_mission"
 FAULTS = ("none", "gyro-drift", "imu-shift")
 START_BOXES = ("left", "right")  # SPEC 6.1 (ramp.autonomy.arena has the same)
@@ -259,6 +261,17 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     return p
 
 
+def check_cluster_address(address: str) -> None:
+    """`tcp://HOST:PORT` (the scheme Dask's scheduler prints); CampaignError says why not."""
+    scheme, sep, rest = address.partition("://")
+    if not sep or scheme not in ("tcp", "tls"):
+        raise CampaignError(f"--cluster {address!r}: expected tcp://HOST:PORT")
+    try:
+        parse_hostport(rest, example="10.0.0.5:8786")
+    except ValueError as exc:
+        raise CampaignError(f"--cluster {address!r}: {exc}") from None
+
+
 def main(args: argparse.Namespace) -> int:
     """Run the campaign the arguments describe; print the table or the JSON report."""
     try:
@@ -270,8 +283,8 @@ def main(args: argparse.Namespace) -> int:
     try:
         if args.workers is not None and args.workers < 1:
             raise CampaignError(f"--workers must be at least 1, got {args.workers}")
-        if args.cluster is not None and "://" not in args.cluster:
-            raise CampaignError(f"--cluster {args.cluster!r}: expected tcp://HOST:PORT")
+        if args.cluster is not None:
+            check_cluster_address(args.cluster)
         if not args.duration > 0:
             raise CampaignError(f"--duration must be > 0, got {args.duration}")
         specs = plan_runs(args.runs, args.seed, args.fault, args.duration, args.mission)

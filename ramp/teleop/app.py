@@ -23,18 +23,20 @@ from starlette.requests import Request
 from starlette.responses import FileResponse, Response
 from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
-from starlette.websockets import WebSocket, WebSocketDisconnect
+from starlette.websockets import WebSocket
 
 from ramp.teleop.console import Console
+from ramp.teleop.pagereader import PageReader
 
 log = logging.getLogger("ramp.teleop")
 
 #: Messages waiting for a slow page; past this, status updates are dropped (the next one
 #: replaces them anyway), never the page's own answers.
 _QUEUE = 256
-#: Largest message a page may send; inputs are a few hundred bytes.
-_MAX_MESSAGE = 16384
 LOCAL_HOSTS = ["127.0.0.1", "localhost", "[::1]"]
+#: Messages a newer one of the same kind replaces within a second: dropped for a slow page
+#: (the map and the alerts are sent only when they change, so they are kept).
+_REPLACED = frozenset({"status", "autonomy", "autonomy_scan", "bandwidth"})
 
 
 def static_dir() -> Path:
@@ -53,8 +55,8 @@ class _PageSocket:
         try:
             self.queue.put_nowait(text)
         except asyncio.QueueFull:
-            if message.get("type") == "status":
-                return  # stale status is worthless; the next poll brings a fresh one
+            if message.get("type") in _REPLACED:
+                return  # stale news is worthless; the next one comes soon
             with contextlib.suppress(asyncio.QueueEmpty):
                 self.queue.get_nowait()
             self.queue.put_nowait(text)
@@ -83,19 +85,11 @@ def create_app(console: Console) -> Starlette:
         sock = _PageSocket(ws)
         page = console.open_page(sock.post)
         writer = asyncio.create_task(sock.write_loop())
+        reader = PageReader(console, page)
         try:
-            while True:
-                text = await ws.receive_text()
-                if len(text) > _MAX_MESSAGE:
-                    continue
-                try:
-                    msg = json.loads(text)
-                except ValueError:
-                    continue
-                await console.page_message(page, msg)
-        except (WebSocketDisconnect, RuntimeError):
-            pass
+            await reader.read(ws)
         finally:
+            reader.close()
             console.close_page(page)
             writer.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):

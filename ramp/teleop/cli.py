@@ -1,4 +1,5 @@
-"""`ramp-teleop --backend HOST:PORT [--http-port P] [--name operator] [--profile NAME]`.
+"""`ramp-teleop --backend HOST:PORT [--autonomy HOST:PORT] [--http-port P] [--name operator]
+[--profile NAME]`.
 
 Serves the operator console on 127.0.0.1 (the page drives a robot: it is not offered to the
 network) and prints `ramp-teleop: open http://127.0.0.1:PORT/` once it is serving.
@@ -11,7 +12,6 @@ import asyncio
 import logging
 import re
 import signal
-import socket
 import sys
 from collections.abc import Sequence
 
@@ -58,6 +58,10 @@ def build_parser() -> argparse.ArgumentParser:
                     "function, a gamepad with a dead-man button, and a STOP that always works.")
     p.add_argument("--backend", default="127.0.0.1:5577", metavar="HOST:PORT",
                    help="the robot's MCP address (default 127.0.0.1:5577)")
+    p.add_argument("--autonomy", default=None, metavar="HOST:PORT",
+                   help="the autonomy's live view (ramp-autonomy --foxglove-port, ramp sim "
+                        "mission --foxglove-port): shows its state, map and alerts; without "
+                        "it, or while it is unreachable, the console works as before")
     p.add_argument("--http-port", type=int, default=8080, metavar="P",
                    help="port of the page on 127.0.0.1 (default 8080; 0 picks a free one)")
     p.add_argument("--name", type=_name, default="operator",
@@ -81,6 +85,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as exc:
         print(f"ramp-teleop: --backend: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    autonomy = None
+    if args.autonomy is not None:
+        try:
+            autonomy = parse_address(args.autonomy)
+        except ValueError as exc:
+            print(f"ramp-teleop: --autonomy: {exc}", file=sys.stderr)
+            return EXIT_USAGE
     if not 0 <= args.http_port <= 65535:
         print("ramp-teleop: --http-port must be 0-65535", file=sys.stderr)
         return EXIT_USAGE
@@ -101,15 +112,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"ramp-teleop: {exc.name} is missing; install the console's extra: "
               "pip install 'ramp[teleop]'", file=sys.stderr)
         return EXIT_USAGE
+    from ramp.teleop.listen import listen, raise_fd_limit
+
+    raise_fd_limit()
     try:
-        sock = socket.create_server((HTTP_HOST, args.http_port))
+        sock = listen(HTTP_HOST, args.http_port)
     except OSError as exc:
         print(f"ramp-teleop: cannot serve on {HTTP_HOST}:{args.http_port}: {exc.strerror}",
               file=sys.stderr)
         return EXIT_USAGE
     http_port = sock.getsockname()[1]
     console = Console(host, port, name=args.name, library=library, profile=profile,
-                      poll_hz=args.poll_hz, battery=args.battery)
+                      poll_hz=args.poll_hz, battery=args.battery, autonomy=autonomy)
     # ws="websockets-sansio": name the WebSocket implementation, so a missing library is an
     # import error at start rather than uvicorn quietly answering every upgrade with 404.
     config = uvicorn.Config(create_app(console), ws="websockets-sansio", lifespan="on",

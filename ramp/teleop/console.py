@@ -21,7 +21,10 @@ from ramp.mcp.describe import READ_FUNCTIONS, Catalog, error_text
 from ramp.mcp.messages import Request, Response
 from ramp.mcp.protocol import format_requests, parse_message
 from ramp.mcp.session import Reply
+from ramp.teleop.alerts import AlertBook, Inputs, raised
+from ramp.teleop.autonomy import AutonomyLink
 from ramp.teleop.controller import Controller, Message, module_stop
+from ramp.teleop.gate import PROBE, MotionGate
 from ramp.teleop.mapping import PadState, intent_of
 from ramp.teleop.profile import Profile, ProfileError, ProfileLibrary
 from ramp.teleop.robot import Link, Status, StatusPoller, catalog_view
@@ -33,6 +36,7 @@ CALL_TIMEOUT_S = 1.0
 STOP_ALL = "robot:robot.stop=()"
 _SPLIT_PARAMS = re.compile(r"[,\s]+")
 _MAX_KEYS = 16
+_DEVICE = re.compile(r"[A-Za-z0-9_]{1,32}:[A-Za-z0-9_]{1,32}\Z")
 
 Sink = Callable[[dict[str, Any]], None]
 
@@ -94,7 +98,8 @@ class Console:
 
     def __init__(self, host: str, port: int, *, name: str, library: ProfileLibrary,
                  profile: Profile, poll_hz: float = 10.0,
-                 battery: tuple[float, float] = (17.0, 21.0)) -> None:
+                 battery: tuple[float, float] = (17.0, 21.0),
+                 autonomy: tuple[str, int] | None = None) -> None:
         self.host, self.port, self.name = host, port, name
         self.library, self.profile = library, profile
         self.poll_hz, self.battery = poll_hz, battery
@@ -103,6 +108,7 @@ class Console:
         self.poller = StatusPoller(self.status_link, poll_hz, on_status=self._on_status,
                                    on_catalog=self._on_catalog)
         self.controller = Controller(stop_for=self._stop_for)
+        self.gate = MotionGate()
         self.pages: dict[str, Sink] = {}
         self._drive_views: dict[str, dict[str, object]] = {}
         self._next_page = 0
@@ -111,6 +117,13 @@ class Console:
         #: The operator took control and has not handed it back: re-taken after a reconnect.
         self.want_control = False
         self._watchdog_state = ""
+        #: The autonomy's live view (SPEC 7.1), when `--autonomy` names one.
+        self.autonomy = AutonomyLink(*autonomy, on_update=self._on_autonomy) \
+            if autonomy is not None else None
+        self.alerts = AlertBook()
+        self._bandwidth: dict[str, Any] = {}
+        self._counted: tuple[float, int, int] | None = None  # (time, mcp bytes, view bytes)
+        self._started_at = 0.0
 
     # -- lifecycle ------------------------------------------------------------------------------
     def now(self) -> float:
@@ -124,7 +137,11 @@ class Console:
             asyncio.create_task(self.command_link.run(), name="command link"),
             asyncio.create_task(self.poller.run(), name="status poller"),
             asyncio.create_task(self._tick_loop(), name="controller tick"),
+            asyncio.create_task(self._bandwidth_loop(), name="bandwidth"),
         ]
+        if self.autonomy is not None:
+            self._tasks.append(asyncio.create_task(self.autonomy.run(), name="autonomy view"))
+        self._started_at = self.now()
 
     async def stop(self) -> None:
         """Stop what this console moved, then close both links."""
@@ -140,6 +157,8 @@ class Console:
                 await task
         await self.command_link.close()
         await self.status_link.close()
+        if self.autonomy is not None:
+            await self.autonomy.close()
 
     # -- pages ----------------------------------------------------------------------------------
     def open_page(self, sink: Sink) -> str:
@@ -151,6 +170,14 @@ class Console:
         sink({"type": "catalog", "modules": catalog_view(self.poller.catalog,
                                                           self.poller.status.states)})
         sink(self.status_message(self.poller.status))
+        if self.autonomy is not None:
+            view = self.autonomy.view
+            sink({"type": "autonomy_map", "map": view.map})
+            sink({"type": "autonomy_scan", "points": view.scan})
+            sink(self.autonomy_message())
+        sink({"type": "alerts", "alerts": self.alerts.view()})
+        if self._bandwidth:
+            sink(self._bandwidth)
         return page
 
     def close_page(self, page: str) -> None:
@@ -163,24 +190,31 @@ class Console:
         return {"type": "hello", "name": self.name, "backend": f"{self.host}:{self.port}",
                 "poll_hz": self.poll_hz, "battery": list(self.battery),
                 "profiles": self.library.names(), "profile": self.profile.summary(),
+                "autonomy": self.autonomy.address if self.autonomy is not None else None,
                 "safety": {"stale_after": self.controller.stale_after,
                            "focus_grace": self.controller.focus_grace}}
 
-    async def page_message(self, page: str, msg: Any) -> None:
+    def page_input(self, page: str, msg: dict[str, Any], at: float | None = None) -> None:
+        """An input frame (pad, keys, focus) that arrived at loop time `at`: applied at once,
+        and the page's freshness is that arrival, not now."""
+        if page not in self.pages:
+            return
+        keys = [k for k in msg.get("keys", []) if isinstance(k, str)][:_MAX_KEYS] \
+            if isinstance(msg.get("keys"), list) else []
+        intent = intent_of(self.profile, pad_from_json(msg.get("pad")), keys)
+        self.controller.page_input(page, self.now() if at is None else at,
+                                   focused=bool(msg.get("focused", True)), intent=intent)
+        self._run_tick()
+
+    async def page_message(self, page: str, msg: Any, at: float | None = None) -> None:
         """One message from a page; malformed ones are answered with an event, never fatal."""
         if not isinstance(msg, dict) or page not in self.pages:
             return
         kind = msg.get("type")
-        now = self.now()
         if kind == "input":
-            keys = [k for k in msg.get("keys", []) if isinstance(k, str)][:_MAX_KEYS] \
-                if isinstance(msg.get("keys"), list) else []
-            intent = intent_of(self.profile, pad_from_json(msg.get("pad")), keys)
-            self.controller.page_input(page, now, focused=bool(msg.get("focused", True)),
-                                       intent=intent)
-            self._run_tick()
+            self.page_input(page, msg, at)
             return
-        self.controller.seen(page, now)
+        self.controller.seen(page, self.now() if at is None else at)
         if kind == "stop":
             await self.stop_all(page)
         elif kind == "call":
@@ -189,14 +223,21 @@ class Console:
             await self.control(page, str(msg.get("action", "")))
         elif kind == "profile":
             self.switch_profile(page, str(msg.get("name", "")))
+        elif kind == "reset":
+            await self.reset(page, str(msg.get("target", "")))
         else:
             self._post(page, {"type": "event", "level": "warning",
                               "text": f"unknown page message {kind!r}"})
 
+    def busy(self, page: str, msg: dict[str, Any]) -> None:
+        """Too many of the page's calls wait for answers: this one is not sent."""
+        self._post(page, {"type": "result", "id": msg.get("id"), "ok": False,
+                          "text": "busy: too many calls waiting for the robot; not sent"})
+
     # -- operator actions -----------------------------------------------------------------------
     async def stop_all(self, page: str) -> None:
         """The big STOP: `robot:robot.stop=()` on whichever link is up, and latch."""
-        self.controller.interrupted(self.now(), "STOP pressed")
+        self._interrupted("STOP pressed")
         future = self.command_link.submit(STOP_ALL) or self.status_link.submit(STOP_ALL)
         if future is None:
             self._post(page, {"type": "result", "id": "stop", "ok": False,
@@ -227,13 +268,13 @@ class Console:
         if (request.module, request.device, request.function) == \
                 ("robot", "control", "acquire") and not refused:
             self.want_control = True
-            self.controller.interrupted(self.now(), "control taken")
+            self._interrupted("control taken")
         elif (request.module, request.device, request.function) == \
                 ("robot", "control", "release") and not refused:
             self.want_control = False
         elif request.function == "stop" and not refused:
             if request.module == "robot":
-                self.controller.interrupted(self.now(), "robot stopped")
+                self._interrupted("robot stopped")
             else:
                 self.controller.forget([request.module])
         elif is_motion(request, self.poller.catalog) and not refused:
@@ -246,6 +287,14 @@ class Console:
         elif action == "release":
             await self.call(page, {"id": "control", "target": "robot:control.release",
                                    "params": ""})
+
+    async def reset(self, page: str, target: str) -> None:
+        """An alert's Reset: `MODULE:DEVICE.reset=()`, acknowledging a latched fault."""
+        if not _DEVICE.match(target):
+            self._post(page, {"type": "result", "id": "reset", "ok": False,
+                              "text": f"reset: {target!r} is not MODULE:DEVICE"})
+            return
+        await self.call(page, {"id": "reset", "target": f"{target}.reset", "params": ""})
 
     def switch_profile(self, page: str, name: str) -> None:
         try:
@@ -266,7 +315,14 @@ class Console:
             return module_stop(module)
         return Request("robot", "robot", "stop")
 
+    def _interrupted(self, reason: str) -> None:
+        """The robot was stopped: nothing held goes out, driving latches until re-pressed."""
+        self.gate.cancel()
+        self.controller.interrupted(self.now(), reason)
+
     def _command_link_changed(self, up: bool, detail: str) -> None:
+        if not up:
+            self.gate.cancel()
         self.controller.set_link(up, self.now())
         self._broadcast({"type": "event", "level": "info" if up else "error",
                          "text": f"command link {'up' if up else 'lost'}: {detail}"})
@@ -289,10 +345,73 @@ class Console:
             fresh = status.sent_at is not None and \
                 status.sent_at > self.controller.last_motion_at + 0.05
             if fresh:
-                self.controller.interrupted(self.now(), "watchdog tripped")
+                self._interrupted("watchdog tripped")
         self._watchdog_state = state
         self._broadcast(self.status_message(status))
         self._push_drive_views()
+        self._update_alerts()
+
+    # -- the autonomy's view, alerts, bandwidth -------------------------------------------------
+    def autonomy_message(self) -> dict[str, Any]:
+        assert self.autonomy is not None
+        return {"type": "autonomy", "address": self.autonomy.address,
+                **self.autonomy.view.summary(self.now())}
+
+    def _on_autonomy(self, kind: str) -> None:
+        assert self.autonomy is not None
+        view = self.autonomy.view
+        if kind == "/map":
+            self._broadcast({"type": "autonomy_map", "map": view.map})
+        elif kind == "/lidar/scan":
+            self._broadcast({"type": "autonomy_scan", "points": view.scan})
+        self._broadcast(self.autonomy_message())
+        self._update_alerts()
+
+    def _update_alerts(self) -> None:
+        status = self.poller.status
+        volts = tuple(f"{p.module}:{p.device}.{p.name}"
+                      for props in self.poller.catalog.properties.values() for p in props
+                      if p.unit == "V")
+        inputs = Inputs(robot_reachable=status.reachable or status.polls == 0,
+                        robot_detail=status.detail, values=status.values, states=status.states,
+                        errors=status.errors, batteries=volts, battery_range=self.battery,
+                        operator=self.name,
+                        autonomy=None if self.autonomy is None else
+                        self.autonomy.view.summary(self.now()))
+        if self.alerts.update(raised(inputs), self.now()):
+            self._broadcast({"type": "alerts", "alerts": self.alerts.view()})
+
+    async def _bandwidth_loop(self) -> None:
+        while True:
+            await asyncio.sleep(1.0)
+            try:
+                self._count_bandwidth()
+                if self.autonomy is not None:  # "stale" and "in state" move with time
+                    self._broadcast(self.autonomy_message())
+                    self._update_alerts()
+            except Exception:  # never end the loop that keeps the page's figures
+                log.exception("bandwidth count failed")
+
+    def link_bytes(self) -> tuple[int, int]:
+        """Bytes both ways so far: (MCP, both links; the autonomy's view)."""
+        mcp = self.status_link.bytes_total + self.command_link.bytes_total
+        view = 0 if self.autonomy is None else self.autonomy.bytes_in + self.autonomy.bytes_out
+        return mcp, view
+
+    def _count_bandwidth(self) -> None:
+        now = self.now()
+        mcp, view = self.link_bytes()
+        if self._counted is not None:
+            t0, mcp0, view0 = self._counted
+            dt = max(1e-3, now - t0)
+            elapsed = max(1e-3, now - self._started_at)
+            self._bandwidth = {"type": "bandwidth", "mcp_bps": round((mcp - mcp0) / dt),
+                               "view_bps": round((view - view0) / dt),
+                               "total_bps": round((mcp + view - mcp0 - view0) / dt),
+                               "average_bps": round((mcp + view) / elapsed),
+                               "autonomy": self.autonomy is not None}
+            self._broadcast(self._bandwidth)
+        self._counted = (now, mcp, view)
 
     def _on_catalog(self, catalog: Catalog) -> None:
         self._broadcast({"type": "catalog",
@@ -321,11 +440,37 @@ class Console:
 
     def _send(self, messages: list[Message]) -> None:
         for message in messages:
-            future = self.command_link.submit(message)
-            if future is None:
-                continue
-            if message:
-                future.add_done_callback(functools.partial(self._check_motion_reply, message))
+            now_message, probe = self.gate.offer(message)
+            if probe:
+                future = self.command_link.submit(PROBE)
+                if future is None:
+                    self.gate.answered(None)
+                else:
+                    future.add_done_callback(self._probed)
+            if now_message is not None:
+                self._submit(now_message)
+
+    def _submit(self, message: Message) -> None:
+        future = self.command_link.submit(message)
+        if future is not None and message:
+            future.add_done_callback(functools.partial(self._check_motion_reply, message))
+
+    def _probed(self, future: asyncio.Future[Reply[Any]]) -> None:
+        """The check before held motion: send it, or latch when someone stopped us."""
+        rows = None
+        if not future.cancelled() and future.exception() is None:
+            with contextlib.suppress(Exception):
+                rows = future.result().responses()
+        held, why = self.gate.answered(rows)
+        if held is not None:
+            self._submit(held)
+            return
+        if why and rows is not None:
+            self.controller.interrupted(self.now(), why)
+            self._broadcast({"type": "event", "level": "warning",
+                             "text": f"driving latched: {why}; release the dead-man and "
+                                     "press it again to drive"})
+            self._push_drive_views()
 
     def _check_motion_reply(self, message: Message, future: asyncio.Future[Reply[Any]]) -> None:
         if future.cancelled() or future.exception() is not None:
@@ -337,6 +482,7 @@ class Console:
         refused = refused_modules(message, rows)
         if refused:
             self.controller.forget(refused)
+            self.gate.forget(refused)
             errors = "; ".join(f"{r.module}:{r.device} {error_text(r)}" for r in rows
                                if r.prop == "error")
             self._broadcast({"type": "event", "level": "error",

@@ -44,6 +44,7 @@ class Link:
         self.client: AsyncMcpClient | None = None
         self.detail = "connecting"
         self._stopping = False
+        self._bytes_before = 0  # by the connections closed so far
 
     @property
     def up(self) -> bool:
@@ -71,6 +72,7 @@ class Link:
             with contextlib.suppress(asyncio.CancelledError):
                 await watchdog
             self.client = None
+            self._bytes_before += client.bytes_in + client.bytes_out
             if self._stopping:
                 break
             self.detail = f"lost: {client.close_reason}"
@@ -89,6 +91,13 @@ class Link:
                 client.close_reason = f"no answer within {self.answer_timeout:g} s"
                 return
             await asyncio.sleep(self.answer_timeout / 4)
+
+    @property
+    def bytes_total(self) -> int:
+        """Bytes both ways over every connection of this link so far."""
+        client = self.client
+        now = client.bytes_in + client.bytes_out if client is not None else 0
+        return self._bytes_before + now
 
     def submit(self, message: Message) -> asyncio.Future[Reply[Any]] | None:
         """Write a message now if connected; the future's exception is always retrieved."""

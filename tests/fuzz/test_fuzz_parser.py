@@ -225,19 +225,20 @@ def test_numbers_at_every_limit_on_the_demo_tables(demo: Harness, token: str) ->
         assert h.world.motors.get("demo.motor", 0.0) == before
     ask(h, c, "demo:demo.stop=()")
 
-    old = h.sup.watchdog.timeout
+    old = c.timeout
     resp = ask(h, c, f"robot:watchdog.timeout=({token})")
     f = spec_float(token)
     if f is not None and 0.05 <= f <= 60:
         assert resp == ""
-        assert h.sup.watchdog.timeout == f
+        assert c.timeout == f  # the sender's own (SPEC 2.2)
+        assert h.sup.watchdog.timeout == 0.5  # the default for everyone else is unchanged
         shown = f"{f:.3f}".rstrip("0")
         shown = "0.0" if shown in ("0.", "-0.") else shown + ("0" if shown.endswith(".") else "")
         assert f"robot:watchdog.timeout=({shown})" in ask(h, c, "robot:robot.get=()")
         ask(h, c, "robot:watchdog.timeout=(0.5)")
     else:
         assert resp == "robot:watchdog.error=(bad_params,timeout takes one float in 0.05..60)"
-        assert h.sup.watchdog.timeout == old
+        assert c.timeout == old
 
 
 def test_long_int_with_leading_zeros_is_an_int(demo: Harness) -> None:

@@ -235,3 +235,34 @@ def test_ramp_run_sim_serves_the_sim_module() -> None:
     finally:
         proc.terminate()
         proc.communicate(timeout=10)
+
+
+def test_unplug_a_can_bus_silences_the_odrives_until_plugged() -> None:
+    """MARTE on ODrives (examples/marte-odrive.yaml): the axes fall silent on the CAN bus,
+    the driver's stale-heartbeat check faults the Base, and it comes back after plug."""
+    from tests.harness import REPO
+
+    h = SimHarness((REPO / "examples" / "marte-odrive.yaml").read_text())
+    try:
+        c = h.connect()
+        assert "robot:base.state=(ok)" in c.ask("robot:robot.get=()")
+        assert c.ask("sim:bus.unplug=(base_motors)") == ""
+        h.advance(1.5)
+        assert "robot:base.state=(fault)" in c.ask("robot:robot.get=()")
+        assert c.ask("sim:bus.plug=(base_motors)") == ""
+        h.advance(3.0)
+        assert "robot:base.state=(ok)" in c.ask("robot:robot.get=()")
+        assert c.ask("base:base.drive=(30,0)") == ""
+    finally:
+        h.close()
+
+
+def test_sim_is_a_reserved_module_name() -> None:
+    from ramp.config import parse_config
+
+    text = "buses:\n  io: {driver: sim}\nmodules:\n  sim: {type: demo, motor: {bus: io}, " \
+           "lamp: {bus: io}}\n"
+    _, errors = parse_config(text, "robot.yaml")
+    assert [str(e) for e in errors] == [
+        "robot.yaml:4: modules.sim: `sim` is reserved for the simulator's fault injection "
+        "(SPEC 12, under --sim)"]

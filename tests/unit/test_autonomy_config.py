@@ -178,7 +178,7 @@ def test_check_lists_every_error_and_fails(tmp_path: Path,
                                            capsys: pytest.CaptureFixture[str]) -> None:
     bad = tmp_path / "autonomy.yaml"
     bad.write_text("backend: x\nimu: {serial: -7}\n")
-    assert main(["check", str(bad)]) == 1
+    assert main(["check", str(bad)]) == 2
     err = capsys.readouterr().err.splitlines()
     assert err[0] == f"{bad}:1: backend: 'x': no port; expected HOST:PORT (for " \
                      "example 192.168.1.10:5577)"

@@ -111,7 +111,7 @@ def test_device_and_settings_schema() -> None:
     assert {"hysteresis", "stall_min_change"} <= set(lift)
 
 
-def test_function_table_is_spec_2_1_plus_tare() -> None:
+def test_function_table_is_spec_2_1_plus_tare_and_reset() -> None:
     m, _, _ = build()
     table = {k: (f.kind, [p.describe() for p in f.params]) for k, f in m.functions.items()}
     assert table == {
@@ -124,6 +124,7 @@ def test_function_table_is_spec_2_1_plus_tare() -> None:
         ("lift", "pos"): ("motion", ["float 0..1"]),
         ("chain", "vel"): ("motion", ["int -100..100"]),
         ("load", "tare"): ("state", []),
+        ("lift", "reset"): ("state", []),
     }
 
 
@@ -235,7 +236,12 @@ def test_stall_fault_through_the_module() -> None:
     assert e.value.detail.startswith("lift stalled: ")
     call(m, "chain", "vel", "50")  # the chain is not affected
     assert chans["chain_left"].duty == 0.5
-    call(m, "ble", "stop")
+    call(m, "ble", "stop")  # a stop is not an acknowledgement (SPEC 2.2)
+    assert rows(m)["lift.stalled"] == 1
+    with pytest.raises(RequestError) as e:
+        call(m, "lift", "vel", "30")
+    assert e.value.code == "fault" and e.value.detail.endswith("acknowledge it with ble:lift.reset")
+    assert call(m, "lift", "reset") is None
     assert rows(m)["lift.stalled"] == 0
     world.stuck = False
     call(m, "lift", "pos", "0.5")
@@ -295,7 +301,9 @@ def test_a_robot_wide_stop_keeps_the_stall_latched() -> None:
     assert rows(m)["lift.stalled"] == 1
     with pytest.raises(RequestError):
         call(m, "lift", "extend")
-    call(m, "ble", "stop")  # the operator's explicit stop
+    call(m, "ble", "stop")  # the operator's explicit stop too (it used to clear it)
+    assert rows(m)["lift.stalled"] == 1
+    call(m, "lift", "reset")  # only the acknowledgement does
     assert rows(m)["lift.stalled"] == 0
 
 

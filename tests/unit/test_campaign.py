@@ -120,6 +120,8 @@ def test_table_names_every_column_and_prints_the_success_rate(
     (["--runs", "3", "--mission", "no_colon"], "module:function"),
     (["--runs", "0", "--mission", CHEAP], "--runs must be at least 1"),
     (["--runs", "2", "--cluster", "localhost:8786", "--mission", CHEAP], "tcp://HOST:PORT"),
+    (["--runs", "2", "--cluster", "tcp://localhost", "--mission", CHEAP], "no port"),
+    (["--runs", "2", "--cluster", "tcp://::1:8786", "--mission", CHEAP], "in brackets"),
     (["--runs", "2", "--workers", "0", "--mission", CHEAP], "--workers"),
 ])
 def test_usage_errors_exit_2_and_say_what_to_fix(argv: list[str], message: str,

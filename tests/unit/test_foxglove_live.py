@@ -461,3 +461,104 @@ def test_a_tee_of_nothing_publishes_nowhere() -> None:
     sink.publish(0.0, POSE.topic, {})
     assert sink.timebase is None
     sink.close()
+
+
+# -- hostile clients (issue 22) ----------------------------------------------------------------
+def test_a_page_of_another_site_is_refused_and_local_or_configured_origins_are_served() -> None:
+    from ramp.autonomy.live.foxglove_live import local_origin
+
+    assert local_origin("http://127.0.0.1:8080") and local_origin("http://localhost")
+    assert local_origin("https://[::1]:3000") and not local_origin("http://evil.example")
+    assert not local_origin("null") and not local_origin("http://127.0.0.1.evil.example")
+    live = FoxgloveLive(origin_ns=ORIGIN, origins=["https://app.foxglove.dev"])
+    live.add_channel(POSE)
+
+    async def run() -> None:
+        with pytest.raises(InvalidStatus) as refused:
+            async with connect(live.url, subprotocols=["foxglove.websocket.v1"],
+                               origin="http://evil.example"):  # type: ignore[arg-type]
+                pass
+        assert refused.value.response.status_code == 403
+        for origin in (None, "http://localhost:8080", "https://app.foxglove.dev"):
+            async with client(live, origin=origin) as c:
+                assert POSE.topic in c.channels
+        assert live.refused_origins == 1
+
+    try:
+        live.start(T0)
+        asyncio.run(run())
+    finally:
+        live.close()
+
+
+def test_a_client_asking_for_thousands_of_unknown_channels_and_never_reading_stays_bounded(
+) -> None:
+    """The black-box finding: 20,000 unknown channels asked for over and over by a client
+    that never reads grew the process to ~1 GB and stalled the tick. One message of 20,000
+    is refused whole (too big); 1,500 at a time, 200 times, earn one status each, and only the
+    newest STATUS_DEPTH wait; publish on the tick's thread never waits."""
+    from websockets.exceptions import ConnectionClosed
+
+    from ramp.autonomy.live.foxglove_live import STATUS_DEPTH
+
+    live = FoxgloveLive(origin_ns=ORIGIN)
+    live.add_channel(POSE)
+    many = json.dumps({"op": "subscribe", "subscriptions": [
+        {"id": i, "channelId": 1_000_000 + i} for i in range(20_000)]})
+    some = json.dumps({"op": "subscribe", "subscriptions": [
+        {"id": i, "channelId": 1_000_000 + i} for i in range(1_500)]})
+    assert len(some) < 64 * 1024 < len(many)
+
+    async def run() -> None:
+        async with client(live) as big:
+            await big.ws.send(many)
+            with pytest.raises(ConnectionClosed):
+                while True:
+                    await big.recv()
+            assert big.ws.close_code == 1009
+        sock = socket.create_connection(("127.0.0.1", live.port))
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        sock.setblocking(False)
+        async with connect(live.url, sock=sock, max_queue=1,
+                           subprotocols=["foxglove.websocket.v1"]) as ws:
+            stuck = Client(ws)
+            await stuck.handshake()
+            longest = 0.0
+            asked = 0
+            for i in range(200):
+                try:  # until the server stops reading it (its replies are not read)
+                    await asyncio.wait_for(ws.send(some), 0.5)
+                except TimeoutError:
+                    break
+                asked += 1
+                t = time.perf_counter()
+                live.publish(T0 + i, POSE.topic, {"i": i})
+                longest = max(longest, time.perf_counter() - t)
+            assert asked > 2 * STATUS_DEPTH
+            me = "{}:{}".format(*sock.getsockname()[:2])
+            await asyncio.sleep(0.2)  # let the server thread take every request
+            (stats,) = [s for s in live.client_stats() if s.name == me]
+            assert stats.statuses_queued <= STATUS_DEPTH
+            # Each request got one reply: sent (into the socket buffers), queued or dropped.
+            assert stats.statuses_dropped + stats.statuses_queued <= asked
+            assert longest < 0.005, f"publish took {longest * 1000:.1f} ms"
+            ws.transport.abort()
+
+    try:
+        live.start(T0)
+        asyncio.run(run())
+    finally:
+        live.close()
+
+
+def test_status_replies_waiting_for_a_client_are_bounded_and_counted() -> None:
+    from ramp.autonomy.live.foxglove_live import STATUS_DEPTH, _Client
+
+    c = _Client(None, "x", asyncio.Event())  # type: ignore[arg-type]
+    for i in range(1000):
+        c.status(1, f"reply {i}")
+    assert len(c.statuses) == STATUS_DEPTH and c.statuses_dropped == 1000 - STATUS_DEPTH
+    assert "reply 999" in c.statuses[-1]
+    for _ in range(10_000):  # frames of one channel, never sent: the order list stays small
+        c.push(1, b"frame", depth=4)
+    assert len(c.frames) < 200 and len(c.per_channel[1]) == 4

@@ -64,6 +64,8 @@ def test_a_broken_profile_stops_the_start_with_file_and_line(
 def test_a_bad_backend_address_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["--backend", "host:99999"]) == 2
     assert "--backend" in capsys.readouterr().err
+    assert main(["--autonomy", "host:99999"]) == 2
+    assert "--autonomy" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["--name", "none"])
 

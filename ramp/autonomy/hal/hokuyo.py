@@ -21,6 +21,10 @@ Failures, each named in `fault`:
 - a reply that fails its sums or is cut short: dropped (counted in `stats`), never published.
 
 A host name is resolved once in `start()`, which can block on DNS: give the sensor's IP.
+The socket, the non-blocking connect, the read budget and the back-off are
+`ramp.common.tcpclient.TcpClient`'s, shared with the autonomy's MCP link; the back-off is
+reset only once a whole handshake has passed (a sensor that accepts and then fails keeps
+backing off).
 """
 
 from __future__ import annotations
@@ -51,7 +55,7 @@ from ramp.autonomy.hal.lidar import (
 from ramp.clock import Clock, MonotonicClock
 from ramp.common import tcpclient
 from ramp.common.hostport import parse_hostport
-from ramp.common.tcpclient import IoLoop, TcpClient
+from ramp.common.tcpclient import IoLoop, TcpClient, check_seconds
 from ramp.scheduler import Scheduler
 
 log = logging.getLogger("ramp.autonomy.hokuyo")
@@ -92,14 +96,9 @@ class HokuyoLidar(Lidar):
                  backoff_max: float = 8.0, fault_retry: float = 2.0) -> None:
         super().__init__(name)
         host, port = parse_address(address)
-        for label, value in (("connect_timeout", connect_timeout),
-                             ("reply_timeout", reply_timeout),
-                             ("stream_timeout", stream_timeout), ("backoff_min", backoff_min),
-                             ("backoff_max", backoff_max), ("fault_retry", fault_retry)):
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name}: {label} must be a positive number of seconds")
-        if backoff_max < backoff_min:
-            raise ValueError(f"{name}: backoff_max is smaller than backoff_min")
+        check_seconds(name, connect_timeout=connect_timeout, reply_timeout=reply_timeout,
+                      stream_timeout=stream_timeout, backoff_min=backoff_min,
+                      backoff_max=backoff_max, fault_retry=fault_retry)
         if not 1 <= cluster <= 99:
             raise ValueError(f"{name}: cluster must be 1-99, got {cluster}")
         if first_step is not None and last_step is not None and last_step < first_step:

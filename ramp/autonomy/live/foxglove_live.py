@@ -23,6 +23,21 @@ since the Unix epoch, as the recorder maps them, so Foxglove shows real dates.
 
 Channels named in `latched` (a map sent only when it changes, the mission's state) keep
 their last message, and a client that subscribes later gets it at once.
+
+Hostile clients (issue 22's black-box findings):
+
+- **Origin.** A web page open in the operator's browser could otherwise open this socket and
+  read the live pose and scans. As the console does, a connection with no `Origin` (a
+  desktop app, `ramp-teleop`, a script) or a local one (`http(s)://localhost`,
+  `127.0.0.1`, `[::1]`, any port) is served; any other Origin only when it is in `origins`
+  (e.g. `https://app.foxglove.dev`); the rest get 403 and a log line.
+- **Bounded everything.** A client's message is at most `MAX_CLIENT_MESSAGE` bytes (a
+  subscribe of 20,000 channels is closed with 1009, not parsed), one request earns at most
+  one status reply, and the status replies waiting for a client that does not read are at
+  most `STATUS_DEPTH`, the rest dropped and counted. Frames dropped for newer ones leave no
+  trace in the client's queue. One client asking for 20,000 unknown channels over and over
+  and never reading grew the process to ~1 GB and stalled the mission's tick for 26 s; now
+  its queues stay a few kB and the tick never waits for it.
 """
 
 from __future__ import annotations
@@ -52,6 +67,24 @@ DEFAULT_HOST = "127.0.0.1"
 #: Messages kept per channel for each client that has not taken them yet.
 DEFAULT_DEPTH = 8
 START_TIMEOUT_S = 5.0
+#: Largest message a client may send (a subscribe of ~2,000 channels fits).
+MAX_CLIENT_MESSAGE = 64 * 1024
+#: Status replies kept for a client that has not read them; older ones are dropped, counted.
+STATUS_DEPTH = 16
+_LOCAL_HOSTS = frozenset({"localhost", "127.0.0.1", "[::1]", "::1"})
+
+
+def local_origin(origin: str) -> bool:
+    """`http(s)://` a name of this machine, any port."""
+    scheme, sep, rest = origin.partition("://")
+    if not sep or scheme not in ("http", "https"):
+        return False
+    host = rest.split("/", 1)[0]
+    if host.startswith("["):
+        host = host[:host.find("]") + 1] if "]" in host else host
+    else:
+        host = host.rsplit(":", 1)[0] if host.count(":") == 1 else host
+    return host.lower() in _LOCAL_HOSTS
 
 
 
@@ -93,12 +126,15 @@ class WallTimeBase:
 @dataclass(frozen=True)
 class ClientStats:
     """One connection: `name` (host:port), Message Data frames `sent` to it, `dropped` for
-    newer ones while it read slowly, and `queued` for it now (at most `depth` a channel)."""
+    newer ones while it read slowly, `queued` for it now (at most `depth` a channel), and
+    status replies queued and dropped (at most `STATUS_DEPTH` wait)."""
 
     name: str
     sent: int
     dropped: int
     queued: int
+    statuses_queued: int = 0
+    statuses_dropped: int = 0
 
 
 @dataclass(eq=False)
@@ -127,6 +163,9 @@ class _Client:
     subs: dict[int, _Channel] = field(default_factory=dict)          # subscription id ->
     advertised: set[int] = field(default_factory=set)                # channel ids
     control: deque[str] = field(default_factory=deque)               # never dropped
+    #: Status replies, at most STATUS_DEPTH; the oldest go first, counted.
+    statuses: deque[str] = field(default_factory=deque)
+    statuses_dropped: int = 0
     #: Frames in the order they came, as [channel id, frame]; a dropped one's frame is None.
     frames: deque[list[Any]] = field(default_factory=deque)
     per_channel: dict[int, deque[list[Any]]] = field(default_factory=dict)
@@ -146,6 +185,10 @@ class _Client:
             queue.popleft()[1] = None
             dropped += 1
         self.dropped += dropped
+        if dropped and len(self.frames) > 2 * depth * len(self.per_channel) + 64:
+            # A client that never reads: forget the dropped frames' places in the order,
+            # or they pile up (None each) for as long as it stays connected.
+            self.frames = deque(e for e in self.frames if e[1] is not None)
         self.wake.set()
         return dropped
 
@@ -156,6 +199,14 @@ class _Client:
 
     def say(self, text: str) -> None:
         self.control.append(text)
+        self.wake.set()
+
+    def status(self, level: int, message: str) -> None:
+        """A status reply; a client that does not read them keeps only the newest."""
+        if len(self.statuses) >= STATUS_DEPTH:
+            self.statuses.popleft()
+            self.statuses_dropped += 1
+        self.statuses.append(protocol.status(level, message))
         self.wake.set()
 
     def advertise(self, channels: Iterable[_Channel]) -> None:
@@ -179,7 +230,7 @@ class FoxgloveLive:
     def __init__(self, *, host: str = DEFAULT_HOST, port: int = 0, name: str = "ramp",
                  origin_ns: int | None = None, latched: Iterable[str] = (),
                  depth: int = DEFAULT_DEPTH, inbox: int = 1024,
-                 inbox_bytes: int = 8 << 20) -> None:
+                 inbox_bytes: int = 8 << 20, origins: Iterable[str] = ()) -> None:
         if depth < 1:
             raise ValueError("depth must be at least 1")
         self.host = host
@@ -188,6 +239,9 @@ class FoxgloveLive:
         self.depth = depth
         self.inbox_limit = inbox
         self.inbox_bytes = inbox_bytes
+        #: Origins served besides none and local ones (a web app's, e.g. Foxglove's).
+        self.origins = frozenset(o.rstrip("/") for o in origins)
+        self.refused_origins = 0
         self._origin_ns = origin_ns
         self._latched = frozenset(latched)
         self._channels: dict[str, _Channel] = {}
@@ -284,7 +338,8 @@ class FoxgloveLive:
     def client_stats(self) -> list[ClientStats]:
         """Each connection's figures, as of now."""
         return [ClientStats(c.name, c.sent, c.dropped,
-                            sum(len(q) for q in list(c.per_channel.values())))
+                            sum(len(q) for q in list(c.per_channel.values())),
+                            len(c.statuses), c.statuses_dropped)
                 for c in list(self._clients)]
 
     @property
@@ -375,7 +430,9 @@ class FoxgloveLive:
         try:
             server = await serve(self._connection, self.host, self.port,
                                  subprotocols=[Subprotocol(protocol.SUBPROTOCOL)],
-                                 compression=None, max_size=1 << 20, close_timeout=1.0)
+                                 compression=None, max_size=MAX_CLIENT_MESSAGE,
+                                 max_queue=4, close_timeout=1.0,
+                                 process_request=self._check_origin)
         except OSError as exc:
             self._start_error = exc
             self._ready.set()
@@ -389,6 +446,17 @@ class FoxgloveLive:
             self._loop = None
             server.close()
             await server.wait_closed()
+
+    def _check_origin(self, ws: ServerConnection, request: Any) -> Any:
+        """None (go on) for no Origin, a local one or a configured one; 403 otherwise."""
+        origin = request.headers.get("Origin")
+        if origin is None or local_origin(origin) or origin.rstrip("/") in self.origins:
+            return None
+        self.refused_origins += 1
+        log.warning("foxglove: refused a connection from origin %s (allowed: none, local, "
+                    "or one configured)", origin)
+        from http import HTTPStatus
+        return ws.respond(HTTPStatus.FORBIDDEN, f"origin {origin} is not allowed\n")
 
     async def _connection(self, ws: ServerConnection) -> None:
         peer = ws.remote_address
@@ -404,8 +472,8 @@ class FoxgloveLive:
                 if isinstance(message, str):
                     self._request(client, message)
                 else:
-                    client.say(protocol.status(protocol.STATUS_ERROR,
-                                               "binary client messages are not supported"))
+                    client.status(protocol.STATUS_ERROR,
+                                  "binary client messages are not supported")
         except Exception as exc:  # noqa: BLE001 - one client's trouble ends that client only
             log.debug("foxglove: %s: %s", name, exc)
         finally:
@@ -421,26 +489,25 @@ class FoxgloveLive:
                      client.dropped)
 
     def _request(self, client: _Client, text: str) -> None:
+        """One client request; at most one status reply, whatever its size."""
         try:
             request = protocol.parse_client_text(text)
         except protocol.ClientRequestError as exc:
-            client.say(protocol.status(protocol.STATUS_ERROR, str(exc)))
+            client.status(protocol.STATUS_ERROR, str(exc))
             return
-        by_id = {ch.id: ch for ch in list(self._channels.values())}
         if isinstance(request, protocol.Subscribe):
+            by_id = {ch.id: ch for ch in list(self._channels.values())}
+            unknown: list[int] = []
+            in_use: list[int] = []
+            already: list[str] = []
             for sub_id, channel_id in request.subscriptions:
                 channel = by_id.get(channel_id)
                 if channel is None:
-                    client.say(protocol.status(protocol.STATUS_WARNING,
-                                               f"subscribe: no channel {channel_id}"))
+                    unknown.append(channel_id)
                 elif sub_id in client.subs:
-                    client.say(protocol.status(protocol.STATUS_ERROR,
-                                               f"subscribe: subscription id {sub_id} is "
-                                               "already in use"))
+                    in_use.append(sub_id)
                 elif client in channel.clients:
-                    client.say(protocol.status(protocol.STATUS_WARNING,
-                                               f"subscribe: already subscribed to "
-                                               f"{channel.topic}"))
+                    already.append(channel.topic)
                 else:
                     client.subs[sub_id] = channel
                     channel.clients[client] = sub_id
@@ -448,6 +515,16 @@ class FoxgloveLive:
                         stamp, data = channel.last
                         client.push(channel.id, protocol.message_data(sub_id, stamp, data),
                                     self.depth)
+            problems = []
+            if in_use:
+                problems.append(f"subscription id {_some(in_use)} is already in use")
+            if unknown:
+                problems.append(f"no channel {_some(unknown)}")
+            if already:
+                problems.append(f"already subscribed to {_some(already)}")
+            if problems:
+                client.status(protocol.STATUS_ERROR if in_use else protocol.STATUS_WARNING,
+                              "subscribe: " + "; ".join(problems))
             return
         for sub_id in request.subscription_ids:
             channel = client.subs.pop(sub_id, None)
@@ -477,9 +554,12 @@ class FoxgloveLive:
         """Send a client's queue in order, as fast as its connection takes it."""
         ws = client.ws
         while True:
-            while client.control or client.frames:
+            while client.control or client.statuses or client.frames:
                 if client.control:
                     await ws.send(client.control.popleft())
+                    continue
+                if client.statuses:
+                    await ws.send(client.statuses.popleft())
                     continue
                 channel_id, frame = client.frames.popleft()
                 if frame is None:
@@ -491,3 +571,7 @@ class FoxgloveLive:
             await client.wake.wait()
 
 
+def _some(items: list[Any]) -> str:
+    """The first of a list, and how many more: `7 (and 19999 more)`."""
+    more = f" (and {len(items) - 1} more)" if len(items) > 1 else ""
+    return f"{items[0]}{more}"

@@ -15,6 +15,11 @@ planned); the simulator's truth (`/pose/true`, `true_*` numbers) is added by the
 | `/lidar/scan` | `foxglove.LaserScan` | each scan the autonomy took, at the estimated pose |
 | `/map` | `foxglove.SceneUpdate` | when the map changes: walls, detected obstacles, the plan |
 
+`/map` holds two entities: `mission` (the walls, then the plan's legs; the detected rocks and
+craters as cylinders) and `arena` (the regions' borders and the collector, in the order its
+metadata `lines` names, with the robot's footprint and the arena's size in its metadata), so
+a viewer with no copy of the arena (the operator console) can draw it all.
+
 Frame `arena` (SPEC 6.1) throughout. `/map` and `/mission/state` change seldom: a live view
 keeps their last message for clients that connect later (`LATCHED`).
 
@@ -181,6 +186,10 @@ WALL_COLOUR = _colour(0.2, 0.2, 0.2)
 ROCK_COLOUR = _colour(0.9, 0.2, 0.1, 0.7)
 CRATER_COLOUR = _colour(0.1, 0.2, 0.8, 0.7)
 PLAN_COLOUR = _colour(0.1, 0.6, 0.1)
+REGION_COLOUR = _colour(0.5, 0.5, 0.5, 0.6)
+COLLECTOR_COLOUR = _colour(0.9, 0.7, 0.1)
+#: What each line of the `arena` entity is, in order (its metadata says it too).
+ARENA_LINES = ("start_split", "start_end", "obstacle_end", "collector")
 
 
 def _line(points: Sequence[tuple[float, float]], colour: dict[str, float]) -> dict[str, Any]:
@@ -204,11 +213,40 @@ def scene_message(when: dict[str, int], context: MissionContext) -> dict[str, An
     if context.plan is not None:
         for leg in context.plan.legs:
             lines.append(_line([(float(p[0]), float(p[1])) for p in leg.points], PLAN_COLOUR))
-    entity = {"timestamp": when, "frame_id": FRAME, "id": "mission",
-              "lifetime": {"sec": 0, "nsec": 0}, "frame_locked": False, "metadata": [],
-              "arrows": [], "cubes": [], "spheres": [], "cylinders": cylinders,
-              "lines": lines, "triangles": [], "texts": [], "models": []}
-    return {"deletions": [], "entities": [entity]}
+    entity = _entity(when, "mission", lines, cylinders)
+    return {"deletions": [], "entities": [entity, arena_entity(when)]}
+
+
+def _entity(when: dict[str, int], name: str, lines: list[dict[str, Any]],
+            cylinders: list[dict[str, Any]], metadata: Sequence[tuple[str, str]] = ()
+            ) -> dict[str, Any]:
+    return {"timestamp": when, "frame_id": FRAME, "id": name,
+            "lifetime": {"sec": 0, "nsec": 0}, "frame_locked": False,
+            "metadata": [{"key": k, "value": v} for k, v in metadata],
+            "arrows": [], "cubes": [], "spheres": [], "cylinders": cylinders,
+            "lines": lines, "triangles": [], "texts": [], "models": []}
+
+
+def arena_entity(when: dict[str, int]) -> dict[str, Any]:
+    """The arena's fixed parts (SPEC 6.1) for a viewer that has no copy of them (the
+    console): the regions' borders, the collector behind the x = 0 wall, and in the metadata
+    the robot's footprint and what each line is (`ARENA_LINES`)."""
+    width = arena.ARENA_WIDTH_M
+    half = arena.COLLECTOR_WIDTH_M / 2
+    lines = [
+        _line([(0.0, arena.START_SPLIT_Y_M), (arena.START_END_X_M, arena.START_SPLIT_Y_M)],
+              REGION_COLOUR),
+        _line([(arena.START_END_X_M, 0.0), (arena.START_END_X_M, width)], REGION_COLOUR),
+        _line([(arena.OBSTACLE_END_X_M, 0.0), (arena.OBSTACLE_END_X_M, width)],
+              REGION_COLOUR),
+        _line([(0.0, arena.COLLECTOR_Y_M - half), (-0.25, arena.COLLECTOR_Y_M - half),
+               (-0.25, arena.COLLECTOR_Y_M + half), (0.0, arena.COLLECTOR_Y_M + half)],
+              COLLECTOR_COLOUR),
+    ]
+    meta = (("lines", ",".join(ARENA_LINES)), ("robot_length", str(arena.ROBOT_LENGTH_M)),
+            ("robot_width", str(arena.ROBOT_WIDTH_M)),
+            ("arena_length", str(arena.ARENA_LENGTH_M)), ("arena_width", str(width)))
+    return _entity(when, "arena", lines, [], meta)
 
 
 def scan_message(when: dict[str, int], record: ScanRecord, pose: Pose) -> dict[str, Any]:

@@ -16,6 +16,7 @@ from __future__ import annotations
 from ramp.layers.functional.base_drive import BaseDrive, mix
 from ramp.layers.functional.bucket_ladder import BucketLadder
 from ramp.layers.functional.button import BUTTON_FIELDS, Button
+from ramp.layers.functional.latch import FaultLatch
 from ramp.layers.functional.led import Led
 from ramp.layers.functional.load_cell import LOAD_CELL_FIELDS, LoadCell
 from ramp.layers.functional.motor import MOTOR_FIELDS, Motor
@@ -31,6 +32,6 @@ from ramp.layers.functional.voltage_display import DISPLAY_FIELDS, VoltageDispla
 __all__ = [
     "BATTERY_FIELDS", "BUTTON_FIELDS", "DISPLAY_FIELDS", "FILTER_FIELDS", "LIFT_FIELDS",
     "LOAD_CELL_FIELDS", "MOTOR_FIELDS", "POT_FIELDS",
-    "BaseDrive", "BucketLadder", "Button", "Led", "LoadCell", "Motor", "SystemVoltage",
-    "ThompsonActuator", "Voltage", "VoltageDisplay", "mix",
+    "BaseDrive", "BucketLadder", "Button", "FaultLatch", "Led", "LoadCell", "Motor",
+    "SystemVoltage", "ThompsonActuator", "Voltage", "VoltageDisplay", "mix",
 ]

@@ -13,7 +13,8 @@ Reversals always pass through at least one controller tick at rest. `extend`/`re
 full speed to the end positions (>= 0.99 / <= 0.01); any mode, manual `vel` included, stops
 there, so the end of the stroke is not a stall. A stall guard watches every driven period: if
 the position does not progress by `stall_min_change` (scaled by the commanded speed) within
-`stall_time`, the motor stops and a fault is latched until `stop()`.
+`stall_time`, the motor stops and a fault is latched (`latch`, a `FaultLatch`) until it is
+reset (`clear_fault`, the module's `lift.reset=()`): no stop clears it.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from typing import Any, Literal
 
 from ramp.errors import RequestError
 from ramp.hal.interfaces import AnalogInput
+from ramp.layers.functional.latch import FaultLatch
 from ramp.layers.functional.motor import Motor
 from ramp.schema import Block, Field, Rule
 
@@ -74,7 +76,8 @@ class ThompsonActuator:
         self.stall_min_change = stall_min_change
         self.mode: Mode = "idle"
         self.target: float | None = None
-        self.fault = ""  # "" or the latched stall reason, "lift stalled: ..."
+        #: The stall fault: latched by the stall guard, cleared only by a reset.
+        self.latch = FaultLatch("lift")
         self._seeking = False  # a move_to still heading for the inner band
         self._ref_pos = 0.0
         self._ref_time: float | None = None  # stall guard reference; None = re-arm next tick
@@ -99,8 +102,13 @@ class ThompsonActuator:
         return self.motor.velocity
 
     @property
+    def fault(self) -> str:
+        """"" or the latched stall reason, "lift stalled: ..."."""
+        return self.latch.reason
+
+    @property
     def stalled(self) -> bool:
-        return bool(self.fault)
+        return self.latch.latched
 
     def is_moving(self) -> bool:
         """Driven, or a move or hold in progress (a hold may drive at any moment)."""
@@ -140,14 +148,14 @@ class ThompsonActuator:
         self._hold_step(pos)
 
     def stop(self) -> None:
-        """Motor to zero, any move cancelled. A latched stall stays latched: a watchdog trip,
-        a takeover or a re-attach must not silently re-arm a jammed lift (`clear_fault`)."""
+        """Motor to zero, any move cancelled. A latched stall stays latched: no stop, watchdog
+        trip, takeover or re-attach may silently re-arm a jammed lift (`clear_fault`)."""
         self.mode, self.target, self._seeking = "idle", None, False
         self._drive(0)
 
     def clear_fault(self) -> None:
-        """An operator's explicit stop of the module: the stall has been seen."""
-        self.fault = ""
+        """The stall has been seen and acknowledged (the module's `lift.reset=()`)."""
+        self.latch.clear()
 
     # -- control ------------------------------------------------------------------------------
     def tick(self, now: float, dt: float) -> None:
@@ -232,9 +240,9 @@ class ThompsonActuator:
             reason = (f"lift stalled: moved {max(progress, 0.0):.3f} in "
                       f"{now - self._ref_time:.1f} s while driven {way} at {pos:.2f} "
                       f"- needs {needed:.3f}")
-        self.fault = reason
         self.mode, self.target, self._seeking = "idle", None, False
         self._drive(0)
+        self.latch.trip(reason)
         return True
 
     def _refuse_if_faulted(self) -> None:

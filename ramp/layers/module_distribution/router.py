@@ -16,6 +16,12 @@ client knows what moves the robot without guessing from names:
 - `read` changes nothing: open to everyone (`get`, `describe`, `robot.modules`);
 - `control` is arbitration itself (`control.acquire`: anyone may take over).
 
+**Latched faults** (SPEC 2.2). A device whose component latches a fault (a
+`ramp.layers.functional.FaultLatch`: a lift that stalls) is declared once with `latched`;
+the module then has `DEVICE.reset=()` (kind `state`, the only thing that clears it), a get row
+showing it (`ble:lift.stalled=(1)`), and every motion function of the device refused with
+`fault` while it is latched, whoever calls it. Plugin modules get the same by declaring theirs.
+
 **Answers on the wire.** `get_line` writes a module's get rows straight into one
 pre-formatted response (each row's `MODULE:DEVICE.PROP=(` prefix is built once), and keeps it
 until the robot's state may have changed: the caller passes a version that moves on at every
@@ -100,6 +106,20 @@ class Task:
     run: Callable[[float, float], None]
 
 
+def _refused_while_latched(fn: Function, latch: Any) -> Function:
+    """`fn`, answering `fault` while `latch` is set (see `Module.latched`)."""
+    run = fn.run
+
+    def guarded(*args: Any) -> list[Response] | None:
+        if latch.reason:
+            raise RequestError("fault", f"{latch.reason}; acknowledge it with "
+                                        f"{latch.label}.reset")
+        return run(*args)
+
+    return Function(fn.device, fn.name, fn.params, guarded, fn.kind, fn.help,
+                    fn.takes_context, fn.line)
+
+
 def answer(responses: list[Response] | None) -> bytes:
     """Responses as they go on the wire (no line end): the robot layer's answer to a request."""
     if not responses:
@@ -124,6 +144,10 @@ class Module(ABC):
     def __init__(self, name: str) -> None:
         self.name = name
         self.functions: dict[tuple[str, str], Function] = {}
+        #: Device -> its latched fault (`latched`); motion functions of a guarded device are
+        #: refused while its latch is set.
+        self.latches: dict[str, Any] = {}
+        self._guarded: dict[str, Any] = {}
         self.properties: list[Property] = []
         self._devices: set[str] = set()
         self._get_version: Version | None = None
@@ -161,9 +185,33 @@ class Module(ABC):
 
     # -- table --------------------------------------------------------------------------------
     def add(self, fn: Function) -> None:
+        latch = self._guarded.get(fn.device)
+        if latch is not None and fn.kind == "motion":
+            fn = _refused_while_latched(fn, latch)
         self.functions[(fn.device, fn.name)] = fn
         self._devices.add(fn.device)
         self._describe = None
+
+    def latched(self, device: str, latch: Any, prop: str = "latched",
+                guards: tuple[str, ...] = ()) -> None:
+        """Declare `device`'s latched fault (`latch`: a `FaultLatch`, tripped by the device's
+        component): adds `DEVICE.reset=()` (kind `state`) and the get row `DEVICE.PROP=(0|1)`,
+        and refuses every motion function of the device (and of the devices in `guards`,
+        such as a module-wide drive using it) with `fault` while it is latched."""
+        latch.label = f"{self.name}:{device}"
+        self.latches[device] = latch
+        for d in (device, *guards):
+            self._guarded[d] = latch
+        for fn in list(self.functions.values()):
+            if fn.device in (device, *guards):
+                self.add(fn)
+        def reset(ctx: Any = None) -> None:
+            latch.clear(getattr(getattr(ctx, "client", None), "peer", ""))
+
+        self.add(Function(device, "reset", (), reset, "state",
+                          "acknowledge the latched fault: its motion is accepted again",
+                          takes_context=True))
+        self.prop(Property(device, prop, "int", lambda: int(latch.latched)))
 
     def prop(self, p: Property) -> None:
         self.properties.append(p)

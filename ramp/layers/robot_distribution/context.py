@@ -7,13 +7,21 @@ attributes, and an observer (the flight recorder) sees both without asking anyon
 
 from __future__ import annotations
 
+import math
+
 
 class Client:
     """What the robot layer needs to know of a connection: its identity (the object itself:
-    control and the watchdog compare with `is`) and a printable peer for the log."""
+    control and the watchdog compare with `is`), a printable peer for the log, and what the
+    watchdog keeps of it: when its last complete message arrived, and its own timeout (SPEC
+    2.2: `robot:watchdog.timeout=(s)` sets the sender's, for as long as it is connected)."""
 
     def __init__(self, peer: str) -> None:
         self.peer = peer
+        #: Clock time of its last complete message (any: a heartbeat, an erroneous one).
+        self.last_heard = -math.inf
+        #: Its own watchdog timeout (s); None: the configured default.
+        self.timeout: float | None = None
 
     def __repr__(self) -> str:
         return f"Client({self.peer})"

@@ -46,6 +46,11 @@ class ModuleSlot:
         self.module = module
         self.buses = buses
         self.reason = "not started"
+        #: A module faulted by its own task's exception attaches again no sooner than this
+        #: (retried like hot plug, not at once).
+        self.retry_at = 0.0
+        #: Its task bugs already logged with a traceback: (task, exception type, message).
+        self.bugs: set[tuple[str, str, str]] = set()
         #: Observer hook (the flight recorder): None costs nothing.
         self.on_change: ModuleStateHook | None = None
         self._machine = Machine(model=self, states=list(STATES), transitions=TRANSITIONS,
@@ -55,6 +60,7 @@ class ModuleSlot:
     def on_enter_ok(self, now: float, reason: str = "") -> None:
         """Attached: every bus it uses is ready; it starts from rest."""
         self.reason = ""
+        self.retry_at = 0.0
         self.module.start(now)
         log.info("module %s %s", self.name,
                  "attached" if self._was == "detached" else "re-attached")
@@ -91,7 +97,7 @@ class ModuleRegistry:
         for slot in self.slots.values():
             down = [b for b in slot.buses if not ready(b)]
             if not down:
-                if slot.state != "ok":
+                if slot.state != "ok" and now >= slot.retry_at:
                     slot.attach(now)
                 continue
             reason = "; ".join(f"bus {b}: {why(b)}" for b in down)

@@ -7,8 +7,9 @@ function, parameters, ownership, interlocks (`interlocks.Interlocks`, SPEC 11: i
 asked once per motion request and run as its own scheduler task).
 
 The server hands each message down as a `RequestContext` (client, time): `message(ctx)` once
-(it feeds the watchdog), then `request(ctx, req)` for each of its requests, which returns the
-request's answer as it goes on the wire.
+(its sender has been heard: what the watchdog asks of each commander), then
+`request(ctx, req)` for each of its requests, which returns the request's answer as it goes
+on the wire.
 
 **The state's version.** Anything a `get` reports changes only inside a tick (readings,
 controllers, LED phases) or through this layer (a request that is not a read, a lost client,
@@ -88,17 +89,19 @@ class RobotRequests(Module):
         self.add(Function("interlock", "reset", (NameParam(),), layer.interlock_reset, "state",
                           "clear a latched interlock once its condition has cleared",
                           takes_context=True))
+        # The answer depends on the asking client (its own watchdog timeout) and the uptime
+        # moves: built for each request, never cached.
+        self.add(Function("robot", "get", (), layer.health_rows_for, "read",
+                          "every status row", takes_context=True))
 
     def _get(self) -> list[Response]:
         return self.layer.health_rows()
-
-    def get_line(self, version: Version) -> bytes:
-        return answer(self.layer.health_rows())  # uptime moves: never cached
 
     #: The rows of `robot.get`: (device, property, type, unit).
     HEALTH_ROWS = (("robot", "uptime", "float", "s"), ("tick", "rate", "float", "Hz"),
                    ("tick", "late", "int", "us"), ("tick", "overruns", "int", ""),
                    ("watchdog", "timeout", "float", "s"), ("watchdog", "state", "name", ""),
+                   ("watchdog", "commanders", "int", ""),
                    ("control", "owner", "name", ""), ("clients", "count", "int", ""),
                    ("interlock", "active", "name", ""))
 
@@ -161,11 +164,10 @@ class RobotDistribution:
 
     # -- messages -----------------------------------------------------------------------------
     def message(self, ctx: RequestContext) -> None:
-        """A complete message arrived (any message: heartbeat, erroneous or too long): it
-        feeds the watchdog if its sender is the feeder, before its requests are handled."""
-        watchdog = self.watchdog
-        if watchdog.state == "armed":
-            watchdog.feed(ctx.client, ctx.now)
+        """A complete message arrived (any message: heartbeat, erroneous or too long): its
+        sender has been heard, which is what the watchdog asks of a commander (each client
+        for itself), before its requests are handled."""
+        ctx.client.last_heard = ctx.now
 
     def request(self, ctx: RequestContext, req: Request) -> bytes:
         """One request: its answer as it goes on the wire (b"" for an accepted action)."""
@@ -193,7 +195,7 @@ class RobotDistribution:
             line = fn.line
             if line is not None:
                 return line((self._ticks.ticks, self.changes))
-            return answer(fn.run(*values))
+            return answer(fn.run(ctx, *values) if fn.takes_context else fn.run(*values))
         if (kind == "motion" or kind == "state") and not self.control.may_command(ctx.client):
             return _error(req, "not_owner", f"control is held by {self.control.owner_name}")
         interlocks = self.interlocks
@@ -214,10 +216,7 @@ class RobotDistribution:
         if interlocks.rules and (kind == "motion" or kind == "stop"):
             interlocks.ran(module, fn, values)
         if kind == "motion":
-            if self.any_moving():
-                self.watchdog.arm(ctx.client, ctx.now)
-            else:
-                self.watchdog.reset(ctx.now)
+            self.watchdog.command(module, ctx.client, ctx.now, self.any_moving())
         elif kind == "stop" and not self.any_moving():
             self.watchdog.disarm(ctx.now)
         return answer(result) if result else b""
@@ -244,8 +243,10 @@ class RobotDistribution:
         return [Response("robot", "robot", "modules", names)]
 
     def set_timeout(self, ctx: RequestContext, seconds: float) -> None:
-        self.watchdog.timeout = seconds
-        log.info("watchdog timeout set to %.3f s by %s", seconds, ctx.client.peer)
+        """The sender's own timeout, for as long as it is connected (SPEC 2.2): no other
+        client's changes."""
+        ctx.client.timeout = seconds
+        log.info("watchdog timeout of %s set to %.3f s", ctx.client.peer, seconds)
 
     def acquire(self, ctx: RequestContext, name: str) -> None:
         client = ctx.client
@@ -292,18 +293,29 @@ class RobotDistribution:
     def any_moving(self) -> bool:
         return any(s.state == "ok" and s.module.is_moving() for s in self.slots.values())
 
+    def moving(self, module: str) -> bool:
+        """The module is attached and moving (its commander must keep talking)."""
+        slot = self.slots.get(module)
+        return slot is not None and slot.state == "ok" and slot.module.is_moving()
+
     def stop_all(self, reason: str, now: float = 0.0) -> None:
         """Every attached module stops all motion; nothing is left for the watchdog."""
         self._stop_keep_trip(reason)
         self.watchdog.disarm(now)
 
     def tick(self, now: float, dt: float) -> None:
-        """Scheduler task: the watchdog timer."""
-        if self.watchdog.expired(now):
-            peer = getattr(self.watchdog.feeder, "peer", "?")
-            log.warning("watchdog expired: %s silent for %.2f s; stopping every module",
-                        peer, now - self.watchdog.last_feed)
+        """Scheduler task: is any commander of a moving module late? Then everything stops."""
+        watchdog = self.watchdog
+        if watchdog.state != "armed":
+            return
+        late = watchdog.late(now, self.moving)
+        if late is not None:
+            module, client = late
+            log.warning("watchdog expired: %s silent for %.2f s (its timeout %.3g s) while "
+                        "commanding %s; stopping every module", client.peer,
+                        now - client.last_heard, watchdog.timeout_of(client), module)
             self._stop_keep_trip("watchdog expired")
+            watchdog.trip("expired", now)
 
     def stalled(self, reason: str, now: float = 0.0) -> None:
         """The loop lost time (SPEC 2.2, stalls and freezes): every attached module stops and
@@ -312,10 +324,10 @@ class RobotDistribution:
         self.watchdog.trip(reason, now)
 
     def protects(self, client: Client) -> bool:
-        """The owner, and the feeder of an armed watchdog, keep their connection when the
-        server must make room for a newcomer."""
-        return self.control.owner is client or (
-            self.watchdog.state == "armed" and self.watchdog.feeder is client)
+        """The owner, and every commander of a moving module, keep their connection when
+        the server must make room for a newcomer (evicting a commander would stop it)."""
+        return self.control.owner is client or self.watchdog.commands_moving(
+            client, self.moving)
 
     def client_lost(self, client: Client, now: float = 0.0) -> None:
         self.changes += 1
@@ -324,10 +336,12 @@ class RobotDistribution:
                      self.control.owner_name, client.peer)
             self.control.release(client)
             self._control_changed(client, now)
-        if self.watchdog.client_lost(client, now):
-            log.warning("watchdog tripped: commanding client %s disconnected; stopping every"
-                        " module", client.peer)
+        lost = self.watchdog.client_lost(client, self.moving)
+        if lost:
+            log.warning("watchdog tripped: commanding client %s disconnected (it commanded "
+                        "%s); stopping every module", client.peer, " ".join(lost))
             self._stop_keep_trip("commanding client lost")
+            self.watchdog.trip("commander lost", now)
 
     def stop_modules(self, reason: str) -> None:
         """Every attached module stops; the watchdog state is left to the caller."""
@@ -348,16 +362,25 @@ class RobotDistribution:
             log.exception("module %s failed to stop (%s)", module.name, reason)
 
     # -- health -------------------------------------------------------------------------------
-    def health_rows(self) -> list[Response]:
+    def health_rows_for(self, ctx: RequestContext) -> list[Response]:
+        """`robot.get` as the asking client sees it (its own watchdog timeout)."""
+        return self.health_rows(ctx.client)
+
+    def health_rows(self, client: Client | None = None) -> list[Response]:
+        """`robot.get`'s rows; the watchdog timeout is `client`'s own (the default when
+        None: what a recorder samples)."""
         h = self._health()
+        watchdog = self.watchdog
         p50, p99, mx = h.late_us
         rows = [
             Response("robot", "robot", "uptime", (round(h.uptime, 3),)),
             Response("robot", "tick", "rate", (h.rate_hz,)),
             Response("robot", "tick", "late", (int(p50), int(p99), int(mx))),
             Response("robot", "tick", "overruns", (h.overruns,)),
-            Response("robot", "watchdog", "timeout", (self.watchdog.timeout,)),
-            Response("robot", "watchdog", "state", (self.watchdog.state,)),
+            Response("robot", "watchdog", "timeout", (
+                watchdog.timeout if client is None else watchdog.timeout_of(client),)),
+            Response("robot", "watchdog", "state", (watchdog.state,)),
+            Response("robot", "watchdog", "commanders", (watchdog.count(self.moving),)),
             Response("robot", "control", "owner", (self.control.owner_name,)),
             Response("robot", "clients", "count", (h.clients,)),
         ]

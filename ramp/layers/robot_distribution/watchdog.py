@@ -1,15 +1,22 @@
 """The motion watchdog (SPEC 2.2), a `transitions` state machine: idle, armed, tripped.
 
-Armed by an accepted motion request, whose sender becomes the feeder; fed only by the
-feeder's complete messages, so a monitoring client's polling never keeps a dead driver's
-motors running; disarmed by a stop that leaves nothing moving; tripped on expiry, when the
-feeder disconnects while armed, or when the loop stalled, until the next accepted motion
-request.
+**Every commander feeds for itself.** An accepted motion request makes its sender the
+*commander* of that module (replacing the module's previous one) and arms the watchdog. While
+armed, every client that commands a module that is moving must keep sending complete
+messages; each is judged by its own messages (`Client.last_heard`) against its own timeout
+(`Client.timeout`, else the configured default). When any one of them is silent too long, or
+disconnects, every module stops and the state reads `tripped` until the next accepted motion
+request. So a monitoring client's polling, or a second client's unrelated motion request,
+can never keep a silent or vanished client's motors running: there is no single "feeder"
+whose place another client could take.
 
-The states and their transitions are the table below. The hot path (a message feeding it,
-the tick asking whether it expired) only reads `state`; a transition (about 7 µs) happens
-only when the state really changes: a motion request from the feeder of an armed watchdog
-just renews it.
+A stop that leaves nothing moving disarms it (`idle`); a stalled loop trips it too. The
+commanders are forgotten whenever the watchdog leaves `armed`: from rest, only a new motion
+request makes a commander again.
+
+The states and their transitions are the table below. The hot paths (a message arriving,
+the tick asking whether anyone is late) only read attributes; a transition (about 7 µs)
+happens only when the state really changes.
 """
 
 from __future__ import annotations
@@ -18,6 +25,8 @@ from collections.abc import Callable
 from typing import Any, Literal
 
 from transitions import Machine
+
+from ramp.layers.robot_distribution.context import Client
 
 State = Literal["idle", "armed", "tripped"]
 
@@ -34,7 +43,7 @@ TRANSITIONS: list[Any] = [
     {"trigger": "_disarm", "source": "armed", "dest": "idle"},
     # An accepted motion request that leaves nothing moving: whatever it was, it is over.
     {"trigger": "_reset", "source": ["armed", "tripped"], "dest": "idle"},
-    # Expiry, the feeder lost while armed, a stalled loop: counted every time.
+    # A commander silent or lost while armed, a stalled loop: counted every time.
     {"trigger": "_trip", "source": "*", "dest": "tripped", "after": "_count_trip"},
 ]
 
@@ -46,9 +55,10 @@ class Watchdog:
     state: State
 
     def __init__(self, timeout: float = 1.0) -> None:
+        #: The default timeout (YAML `watchdog.timeout`) of a client that set none.
         self.timeout = timeout
-        self.feeder: object | None = None
-        self.last_feed = 0.0
+        #: Module name -> the client whose accepted motion request it obeys.
+        self.commanders: dict[str, Client] = {}
         self.trips = 0
         #: Observer hook (the flight recorder): None costs nothing.
         self.on_change: WatchdogHook | None = None
@@ -57,51 +67,63 @@ class Watchdog:
                                 initial="idle", auto_transitions=False, queued=True,
                                 after_state_change="_changed")
 
+    def timeout_of(self, client: Client) -> float:
+        """The client's own timeout, or the default."""
+        own = client.timeout
+        return self.timeout if own is None else own
+
     # -- from the robot layer -----------------------------------------------------------------
-    def arm(self, client: object, now: float) -> None:
-        """An accepted motion request left something moving: `client` feeds it from now."""
-        self.feeder = client
-        self.last_feed = now
-        if self.state != "armed":
-            self._go(self._arm, "motion", now)
+    def command(self, module: str, client: Client, now: float, moving: bool) -> None:
+        """An accepted motion request to `module` from `client`: it commands the module now;
+        armed while anything moves (`moving`), idle otherwise."""
+        if moving:
+            self.commanders[module] = client
+            if self.state != "armed":
+                self._go(self._arm, "motion", now)
+        else:
+            self.commanders.clear()
+            if self.state != "idle":
+                self._go(self._reset, "motion request left nothing moving", now)
 
     def disarm(self, now: float = 0.0) -> None:
         """Nothing moves any more: nothing to guard."""
-        self.feeder = None
+        self.commanders.clear()
         if self.state == "armed":
             self._go(self._disarm, "nothing moving", now)
 
-    def reset(self, now: float = 0.0) -> None:
-        """An accepted motion request left nothing moving: idle, whatever it was (a trip is
-        over once a new motion request is accepted)."""
-        self.feeder = None
-        if self.state != "idle":
-            self._go(self._reset, "motion request left nothing moving", now)
-
-    def feed(self, client: object, now: float) -> None:
-        if self.state == "armed" and client is self.feeder:
-            self.last_feed = now
-
-    def expired(self, now: float) -> bool:
-        """True once when the armed timer runs out (the caller stops everything)."""
-        if self.state == "armed" and now - self.last_feed >= self.timeout:
-            self._go(self._trip, "expired", now)
-            return True
-        return False
+    def late(self, now: float, moving: Callable[[str], bool]) -> tuple[str, Client] | None:
+        """While armed: the first (module, commander) whose commander has been silent for its
+        timeout while the module moves, else None. The caller stops and `trip`s."""
+        if self.state != "armed":
+            return None
+        default = self.timeout
+        for module, client in self.commanders.items():
+            own = client.timeout
+            if now - client.last_heard >= (default if own is None else own) and moving(module):
+                return module, client
+        return None
 
     def trip(self, why: str = "stalled", now: float = 0.0) -> None:
-        """Motion was stopped under the robot (a stalled loop): `tripped` until the next
-        accepted motion request, whatever the state was."""
+        """Motion was stopped (a late or lost commander, a stalled loop): `tripped` until the
+        next accepted motion request, whatever the state was."""
+        self.commanders.clear()
         self._go(self._trip, why, now)
 
-    def client_lost(self, client: object, now: float = 0.0) -> bool:
-        """True when the lost client was feeding an armed watchdog (the caller stops)."""
-        if self.state == "armed" and client is self.feeder:
-            self._go(self._trip, "feeder lost", now)
-            return True
-        if client is self.feeder:
-            self.feeder = None
-        return False
+    def client_lost(self, client: Client, moving: Callable[[str], bool]) -> list[str]:
+        """Forget a client that is gone; the moving modules it commanded (the caller stops
+        everything and trips when there are any)."""
+        mine = [m for m, c in self.commanders.items() if c is client]
+        for module in mine:
+            del self.commanders[module]
+        return [m for m in mine if moving(m)]
+
+    def commands_moving(self, client: Client, moving: Callable[[str], bool]) -> bool:
+        """The client commands a module that is moving: it must keep talking."""
+        return any(c is client and moving(m) for m, c in self.commanders.items())
+
+    def count(self, moving: Callable[[str], bool]) -> int:
+        """How many clients command a module that is moving (`robot:watchdog.commanders`)."""
+        return len({id(c) for m, c in self.commanders.items() if moving(m)})
 
     # -- the machine's callbacks --------------------------------------------------------------
     def _go(self, trigger: Callable[[], bool], why: str, now: float) -> None:

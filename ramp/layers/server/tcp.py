@@ -45,7 +45,8 @@ READ_CHUNK = 1024
 TURN_S = 0.002
 #: Always room for a stop (SPEC 2.2): with every slot taken, a newcomer evicts the client
 #: silent longest if it has sent no complete message for this long and is neither the owner
-#: nor the feeder, so an operator can always connect and send robot:robot.stop=().
+#: nor a commander of a moving module (evicting one would stop the robot), so an operator can
+#: always connect and send robot:robot.stop=().
 EVICT_SILENCE_S = 5.0
 #: Out of file descriptors (EMFILE): stop accepting for this long instead of spinning (the
 #: listening socket stays readable, and accept failed 130,924 times in 10 s); the client
@@ -185,7 +186,7 @@ class McpServer:
             if len(self.clients) >= self.max_clients and not self._evict_for(peer):
                 self.refused += 1
                 log.warning("refused %s: already %d clients (server.max_clients), none silent "
-                            "for %.0f s that is neither owner nor feeder", peer,
+                            "for %.0f s that is neither owner nor commanding a moving module", peer,
                             len(self.clients), EVICT_SILENCE_S)
                 _say_and_close(sock, b"robot:mcp.error=(busy,too many clients; at most "
                                + str(self.max_clients).encode() + b")\n")
@@ -201,7 +202,8 @@ class McpServer:
 
     def _evict_for(self, newcomer: str) -> bool:
         """Make room for a newcomer: close the client silent longest, if it has sent no
-        complete message for EVICT_SILENCE_S and is neither the owner nor the feeder."""
+        complete message for EVICT_SILENCE_S and is neither the owner nor a commander of a
+        moving module."""
         now = self.scheduler.clock.now()
         silent = [c for c in self.clients.values()
                   if now - c.last_message_at >= EVICT_SILENCE_S and not self.robot.protects(c)]

@@ -24,6 +24,9 @@
     padNote: "none detected (press a button)",
     callId: 0,
     calls: new Map(), // id -> result element
+    autonomy: null, // the last "autonomy" summary
+    map: {},
+    scan: [],
   };
 
   // ---- helpers --------------------------------------------------------------------------
@@ -51,7 +54,8 @@
   function nowText() { return new Date().toLocaleTimeString(); }
   function event(level, text) {
     const list = $("events");
-    list.prepend(el("li", { class: level }, el("time", { text: nowText() }), text));
+    // Entries carry "ev-LEVEL", never a bare level: "stop" is the big STOP button's class.
+    list.prepend(el("li", { class: `ev-${level}`, "data-testid": "event" }, el("time", { text: nowText() }), text));
     while (list.children.length > 60) list.lastChild.remove();
   }
 
@@ -94,6 +98,11 @@
       case "event": event(msg.level || "info", msg.text || ""); break;
       case "profile": onProfile(msg.profiles, msg.profile); break;
       case "profile_error": onProfileError(msg.text); break;
+      case "autonomy": onAutonomy(msg); break;
+      case "autonomy_map": st.map = msg.map || {}; drawMap(); break;
+      case "autonomy_scan": st.scan = msg.points || []; drawMap(); break;
+      case "alerts": renderAlerts(msg.alerts || []); break;
+      case "bandwidth": onBandwidth(msg); break;
       default: break;
     }
   }
@@ -104,6 +113,130 @@
     $("backend").textContent = `robot ${msg.backend} · operator ${msg.name}`;
     $("conn-backend").textContent = msg.backend;
     onProfile(msg.profiles, msg.profile);
+    if (!msg.autonomy) {
+      $("autonomy-status").textContent = "No autonomy view: start ramp-teleop with --autonomy HOST:PORT "
+        + "(ramp-autonomy --foxglove-port). Teleoperation works as usual.";
+      $("autonomy-state").textContent = "no autonomy";
+      $("autonomy-map").classList.add("hidden");
+    } else {
+      $("autonomy-map").classList.remove("hidden");
+    }
+  }
+
+  // ---- the autonomy's view ----------------------------------------------------------------
+  function fmt(x, digits, unit) {
+    return typeof x === "number" && Number.isFinite(x) ? `${x.toFixed(digits)}${unit || ""}` : "–";
+  }
+  function onAutonomy(msg) {
+    st.autonomy = msg;
+    const status = $("autonomy-status");
+    if (!msg.connected) status.textContent = `autonomy view unreachable (${msg.address}): ${msg.detail}. Teleoperation works as usual.`;
+    else if (msg.stale) status.textContent = `autonomy view ${msg.address}: stale (no news for 3 s)`;
+    else status.textContent = `autonomy view ${msg.address}`;
+    setState(status, !msg.connected || msg.stale ? "warn" : "", ["warn"]);
+    const stateEl = $("autonomy-state");
+    const since = msg.in_state_s != null ? ` · ${formatAge(msg.in_state_s)}` : "";
+    stateEl.textContent = msg.state ? `${msg.state}${since}` : (msg.connected ? "waiting for the mission" : "–");
+    const bad = msg.state === "waiting_for_operator" || ["relevel", "rescan", "relocalize"].includes(msg.state);
+    setState(stateEl, bad ? "bad" : msg.state === "paused" || msg.state === "stop" ? "warn" : "", ["bad", "warn"]);
+    $("autonomy-reason").textContent = msg.reason || "";
+    const n = msg.numbers || {};
+    const conf = $("autonomy-confidence");
+    conf.textContent = fmt(n.pose_confidence, 2);
+    setState(conf, typeof n.pose_confidence === "number" ? (n.pose_confidence < 0.5 ? "bad" : n.pose_confidence < 0.8 ? "warn" : "ok") : "", STATE_CLASSES);
+    $("autonomy-bin").textContent = fmt(n.bin_kg, 1, " kg");
+    $("autonomy-delivered").textContent = fmt(n.delivered_kg, 1, " kg");
+    $("autonomy-lift").textContent = fmt(n.lift, 2);
+    $("autonomy-losses").textContent = n.localization_losses ?? "–";
+    const p = msg.pose;
+    $("autonomy-pose").textContent = p ? `x ${p[0].toFixed(2)} y ${p[1].toFixed(2)} · ${(p[2] * 180 / Math.PI).toFixed(0)}°` : "none (no fix)";
+    drawMap();
+  }
+  function formatAge(s) {
+    if (s < 60) return `${s.toFixed(0)} s`;
+    return `${Math.floor(s / 60)} min ${(s % 60).toFixed(0)} s`;
+  }
+
+  // The arena seen from above: x along the canvas, y up. Everything in arena metres.
+  function drawMap() {
+    const c = $("autonomy-map");
+    if (!c || c.classList.contains("hidden")) return;
+    const g = c.getContext("2d");
+    const W = c.width, H = c.height, m = st.map || {};
+    g.clearRect(0, 0, W, H);
+    const L = 7.38, Wd = 3.88, pad = 16, back = 0.35;
+    const k = Math.min((W - 2 * pad) / (L + back), (H - 2 * pad) / Wd);
+    const X = (x) => pad + (x + back) * k, Y = (y) => H - pad - y * k;
+    const line = (pts, colour, width, dash) => {
+      if (!pts || pts.length < 2) return;
+      g.beginPath(); g.setLineDash(dash || []); g.strokeStyle = colour; g.lineWidth = width;
+      pts.forEach(([x, y], i) => (i ? g.lineTo(X(x), Y(y)) : g.moveTo(X(x), Y(y))));
+      g.stroke(); g.setLineDash([]);
+    };
+    const disc = ([x, y, r], colour) => {
+      g.beginPath(); g.fillStyle = colour; g.arc(X(x), Y(y), Math.max(2, r * k), 0, 2 * Math.PI); g.fill();
+    };
+    line(m.walls && m.walls.length ? m.walls : [[0, 0], [L, 0], [L, Wd], [0, Wd], [0, 0]], "#c8ccd4", 3);
+    for (const r of m.regions || []) line(r, "#6c7480", 1, [6, 5]);
+    for (const r of m.collector || []) line(r, "#f0c020", 3);
+    for (const d of m.craters || []) disc(d, "rgba(68,102,221,.75)");
+    for (const d of m.rocks || []) disc(d, "rgba(229,56,59,.8)");
+    for (const leg of m.plan || []) line(leg, "#2fb062", 2);
+    g.fillStyle = "#f0a020";
+    for (const [x, y] of st.scan || []) g.fillRect(X(x) - 1.5, Y(y) - 1.5, 3, 3);
+    const a = st.autonomy;
+    const [len, wid] = m.robot || [1.2, 0.75];
+    const footprint = (pose, colour, dash, fill) => {
+      if (!pose) return;
+      const [x, y, yaw] = pose, cs = Math.cos(yaw), sn = Math.sin(yaw);
+      const corners = [[len / 2, wid / 2], [-len / 2, wid / 2], [-len / 2, -wid / 2], [len / 2, -wid / 2], [len / 2, wid / 2]]
+        .map(([u, v]) => [x + u * cs - v * sn, y + u * sn + v * cs]);
+      if (fill) {
+        g.beginPath(); g.fillStyle = fill;
+        corners.forEach(([px, py], i) => (i ? g.lineTo(X(px), Y(py)) : g.moveTo(X(px), Y(py))));
+        g.fill();
+      }
+      line(corners, colour, 2, dash);
+      line([[x, y], [x + (len / 2) * cs, y + (len / 2) * sn]], colour, 2, dash);
+    };
+    if (a && a.connected) {
+      footprint(a.true_pose, "#e6e9ee", [5, 4], null);
+      footprint(a.pose, "#3d8bfd", null, "rgba(61,139,253,.25)");
+    }
+    if (!a || !a.connected) {
+      g.fillStyle = "#8b94a3"; g.font = "14px system-ui"; g.fillText("no autonomy view", X(3), Y(Wd / 2));
+    }
+  }
+
+  // ---- alerts ----------------------------------------------------------------------------
+  const alertSeen = new Map(); // alert id -> when this page first showed it
+  function renderAlerts(alerts) {
+    const box = $("alerts");
+    const ids = new Set(alerts.map((a) => a.id));
+    for (const id of [...alertSeen.keys()]) if (!ids.has(id)) alertSeen.delete(id);
+    for (const a of alerts) if (!alertSeen.has(a.id)) alertSeen.set(a.id, new Date().toLocaleTimeString());
+    box.replaceChildren(...alerts.map((a) => {
+      const buttons = [];
+      if (a.takeover) buttons.push(el("button", { type: "button", class: "takeover", "data-testid": "alert-takeover",
+        title: "take control: the robot stops and the mission pauses", text: "Take control",
+        onclick: () => send({ type: "control", action: "acquire" }) }));
+      if (a.reset) buttons.push(el("button", { type: "button", "data-testid": "alert-reset",
+        title: `${a.reset}.reset=()`, text: "Reset", onclick: () => send({ type: "reset", target: a.reset }) }));
+      if (a.id === "mission-paused") buttons.push(el("button", { type: "button", "data-testid": "alert-handback",
+        text: "Hand back", onclick: () => send({ type: "control", action: "release" }) }));
+      return el("div", { class: "alert", "data-testid": "alert", "data-severity": a.severity, "data-alert": a.id, role: a.severity === "error" ? "alert" : "status" },
+        el("div", { class: "alert-body" }, el("span", { class: "alert-title", text: a.title }), el("span", { class: "alert-text", text: a.text })),
+        el("span", { class: "alert-age", text: `since ${alertSeen.get(a.id)}` }),
+        ...buttons);
+    }));
+  }
+
+  function onBandwidth(msg) {
+    const kb = (b) => (b >= 1000 ? `${(b / 1000).toFixed(1)} kB/s` : `${b} B/s`);
+    const e = $("pill-bandwidth");
+    e.textContent = msg.autonomy ? `links ${kb(msg.total_bps)} (MCP ${kb(msg.mcp_bps)} · view ${kb(msg.view_bps)}) · avg ${kb(msg.average_bps)}`
+      : `link ${kb(msg.total_bps)} · avg ${kb(msg.average_bps)}`;
+    setState(e, msg.average_bps > 16000 ? "warn" : "", STATE_CLASSES);
   }
   function onProfile(names, profile) {
     if (st.hello) { st.hello.profile = profile; st.hello.profiles = names; }
@@ -237,8 +370,8 @@
       if (!msg.ok) event("error", `STOP: ${msg.text}`);
       return;
     }
-    if (msg.id === "control") {
-      event(msg.ok ? "info" : "error", `${msg.request}: ${msg.text}`);
+    if (msg.id === "control" || msg.id === "reset") {
+      event(msg.ok ? "info" : "error", `${msg.request || msg.id}: ${msg.text}`);
       return;
     }
     const resultEl = st.calls.get(msg.id);
