@@ -148,6 +148,7 @@ class LidarParams:
     mount_x: float = 0.40  # m
     mount_y: float = 0.0  # m
     mount_z: float = 0.70  # m
+    mount_yaw: float = 0.0  # rad, the pan axis' zero off the chassis' +x (--randomize)
     # The robot's own structure in view (thesis fig. 5.38): the BLE's two frame posts behind
     # and beside the scanner, seen at +-125..135 deg at about 0.4 m. ASSUMPTION: 4 cm posts
     # from the chassis deck to the bin's top edge.

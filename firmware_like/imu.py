@@ -75,6 +75,7 @@ class ImuModel:
     mag_noise_gauss: float = 0.0011  # ASSUMPTION: 1.1 mG (phidgets_drivers' default stdev)
     accel_bias_g: float = 0.002  # ASSUMPTION: sigma of the constant bias per board (seed)
     gyro_bias_dps: float = 0.05  # ASSUMPTION: sigma of the constant bias left after factory cal
+    gyro_offset_dps: Vec3 = (0.0, 0.0, 0.0)  # a constant bias added to it (--randomize)
     accel_range_g: float = 8.0  # 1042 (3/3/3): +-8 g
     gyro_range_dps: float = 2000.0  # 1042 (3/3/3): +-2000 deg/s
     #: ASSUMPTION: Earth's field in the arena frame, gauss (Florida: ~0.24 G horizontal, ~0.41
@@ -145,7 +146,8 @@ class ImuEmulator:
         prng = np.random.default_rng(params_seq)
         md = self.model
         self.accel_bias_g: Vec3 = _vec(prng.normal(0.0, md.accel_bias_g, 3))
-        self.gyro_bias_dps: Vec3 = _vec(prng.normal(0.0, md.gyro_bias_dps, 3))
+        self.gyro_bias_dps: Vec3 = _vec(prng.normal(0.0, md.gyro_bias_dps, 3)
+                                        + np.asarray(md.gyro_offset_dps))
         # Fault parameters are drawn whatever the fault, so a seed means the same board.
         signs = prng.choice((-1.0, 1.0), 3)
         mags = prng.uniform(md.drift_min_dps, md.drift_max_dps, 3)

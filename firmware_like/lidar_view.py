@@ -144,6 +144,7 @@ class LidarView:
              pan: float = 0.0, tilt: float = 0.0) -> LidarPose:
         """The scanner's pose for a chassis pose (m, rad) and gimbal angles (rad)."""
         chassis = rotation_zyx(yaw, pitch, roll)
+        pan += self.params.mount_yaw  # a mount turned on the chassis turns the whole gimbal
         gimbal = rotation_zyx(pan, tilt, 0.0)
         origin = np.array([x, y, z]) + chassis @ self._mount
         return LidarPose(origin, chassis @ gimbal, pan, tilt)

@@ -151,6 +151,7 @@ class MarteWorld:
         self._outputs: dict[str, bool] = dict.fromkeys(DIGITAL_OUTPUTS, False)
         self._unplugged: set[str] = set()
         self._lift_jammed = False
+        self._wheel_scale = dict(zip(WHEELS, p.wheel_speed_scale, strict=True))
         self._lift_blocked = False
         self._digging = False
         self._chain_dig_speed = 0.0
@@ -461,8 +462,8 @@ class MarteWorld:
                                            self.pitch)
         left = sum(self._wheel_ground_speed(n) for n in LEFT_WHEELS) / len(LEFT_WHEELS)
         right = sum(self._wheel_ground_speed(n) for n in RIGHT_WHEELS) / len(RIGHT_WHEELS)
-        left *= self._traction
-        right *= self._traction
+        left *= self._traction * p.traction
+        right *= self._traction * p.traction
         v = 0.5 * (left + right)
         # Counter-clockwise positive: the right side running faster turns the robot left.
         yaw_rate = p.skid_efficiency * (right - left) / p.track_width
@@ -494,6 +495,12 @@ class MarteWorld:
                 moved = True
         if moved:
             self._clamp_to_arena()
+
+    def contacts(self) -> list[str]:
+        """What the footprint touches now (walls, rocks, craters), as the referee names
+        them; empty when it stands clear."""
+        hits, craters = self._contacts()
+        return sorted(hits | craters)
 
     def _contacts(self) -> tuple[set[str], set[str]]:
         """(what the footprint collides with, craters it overlaps) now, by SPEC 6.1."""
@@ -671,7 +678,8 @@ class MarteWorld:
     # ---- helpers ------------------------------------------------------------------------------
 
     def _wheel_ground_speed(self, name: str) -> float:
-        return _MOUNT[name] * self._speed[name] * self.params.wheel_free_speed
+        return (_MOUNT[name] * self._speed[name] * self.params.wheel_free_speed
+                * self._wheel_scale[name])
 
     def _ocv(self, soc: float) -> float:
         """Open-circuit voltage of the pack, interpolated in the per-cell curve."""

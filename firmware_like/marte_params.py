@@ -54,6 +54,10 @@ class MarteParams:
     # sideways when a skid-steer turns, so the chassis turns slower than the wheel speeds
     # imply. ASSUMPTION: 0.6, in the usual 0.5-0.9 range for grousered wheels in loose soil.
     skid_efficiency: float = 0.6
+    # Ground speed over wheel speed (1: no slip), and each wheel's own speed error in WHEELS'
+    # order (lf, lb, rf, rb): 1 on the model, drawn by --randomize (firmware_like.randomize).
+    traction: float = 1.0
+    wheel_speed_scale: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
     button_travel: float = 0.01  # m; rear corner within this of the wall closes the button;
     # ASSUMPTION (plunger travel of a small push button)
 

@@ -24,6 +24,8 @@ from firmware_like.arena import (
     Layout,
     Rock,
     StartSpec,
+    box_bounds,
+    disc_overlap,
     footprint_inside,
 )
 from firmware_like.arena_params import ArenaParams
@@ -103,6 +105,8 @@ class _Checker:
         rocks = tuple(r for r in self.items(root, "rocks", self.rock) if isinstance(r, Rock))
         craters = tuple(c for c in self.items(root, "craters", self.crater)
                         if isinstance(c, Crater))
+        if start is not None:
+            self.start_clear(start, root.lines.get("start", root.line), rocks, craters)
         desc = root.get("description")
         if desc is not None and not isinstance(desc, str):
             self.err("description", root.lines.get("description", root.line),
@@ -172,6 +176,38 @@ class _Checker:
                          f"{math.degrees(yaw_rad):g} is not wholly inside the "
                          f"{self.mp.arena_length} x {self.mp.arena_width} m arena")
         return spec
+
+    def start_clear(self, spec: StartSpec, line: int, rocks: tuple[Rock, ...],
+                    craters: tuple[Crater, ...]) -> None:
+        """The start must not begin in contact: the referee would count a collision the
+        run never drove into, and the physics would push the robot out of a rock unseen.
+        An exact pose is checked as it is; a box's pose comes from the seed anywhere in the
+        box, so no obstacle may reach into the box."""
+        discs = [(f"rocks[{i}]", r.x, r.y, r.d / 2.0) for i, r in enumerate(rocks)]
+        discs += [(f"craters[{i}]", c.x, c.y, c.d / 2.0) for i, c in enumerate(craters)]
+        if spec.x is not None and spec.y is not None:
+            yaw_deg = spec.yaw_deg if spec.yaw_deg is not None else spec.heading_deg
+            yaw = math.radians(yaw_deg)
+            where = f"the footprint at x {spec.x:g}, y {spec.y:g}, yaw {yaw_deg:g}"
+            arena = (0.0, self.mp.arena_length, 0.0, self.mp.arena_width)
+            if not footprint_inside(spec.x, spec.y, yaw, arena, self.mp,
+                                    margin=self.ap.contact_epsilon):
+                self.err("start", line, f"{where} touches a wall; expected a start clear "
+                         "of the walls")
+            for name, cx, cy, r in discs:
+                depth, _, _ = disc_overlap(spec.x, spec.y, yaw, self.mp.robot_length,
+                                           self.mp.robot_width, cx, cy, r)
+                if depth > 0.0:
+                    self.err("start", line, f"{where} overlaps {name} at x {cx:g}, y "
+                             f"{cy:g}; expected a start clear of every obstacle")
+            return
+        x0, x1, y0, y1 = box_bounds(spec.box, self.mp, self.ap)
+        for name, cx, cy, r in discs:
+            nx, ny = min(max(cx, x0), x1), min(max(cy, y0), y1)
+            if math.hypot(cx - nx, cy - ny) < r:
+                self.err("start", line, f"{name} at x {cx:g}, y {cy:g} reaches into the "
+                         f"{spec.box} start box, where the seed places the robot; expected "
+                         "the box clear, or start x, y (and yaw) clear of it")
 
     def items(self, root: LinedMap, key: str, check: Any) -> list[object]:
         if key not in root or root[key] is None:

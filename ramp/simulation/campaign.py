@@ -41,6 +41,13 @@ from multiprocessing import get_context
 from typing import Any
 
 from ramp.common.hostport import parse_hostport
+from ramp.simulation.arguments import (
+    ArgumentError,
+    check_duration,
+    check_runs,
+    check_seed,
+    check_workers,
+)
 
 DEFAULT_MISSION = "ramp.simulation.mission:run_mission"
 FAULTS = ("none", "gyro-drift", "imu-shift")
@@ -67,6 +74,7 @@ class RunSpec:
     fault: str
     duration: float
     mission: str  # "module:function"
+    randomize: bool = False  # passed to the mission as randomize=True only when set
 
 
 def combination(seed: int) -> tuple[str, int]:
@@ -76,7 +84,7 @@ def combination(seed: int) -> tuple[str, int]:
 
 
 def plan_runs(runs: int, seed: int = 0, fault: str = "none", duration: float = 600.0,
-              mission: str = DEFAULT_MISSION) -> list[RunSpec]:
+              mission: str = DEFAULT_MISSION, randomize: bool = False) -> list[RunSpec]:
     """The campaign's runs, in order: run i has seed `seed + i`."""
     if runs < 1:
         raise CampaignError(f"--runs must be at least 1, got {runs}")
@@ -85,7 +93,7 @@ def plan_runs(runs: int, seed: int = 0, fault: str = "none", duration: float = 6
     specs = []
     for i in range(runs):
         box, heading = combination(seed + i)
-        specs.append(RunSpec(i, seed + i, box, heading, fault, duration, mission))
+        specs.append(RunSpec(i, seed + i, box, heading, fault, duration, mission, randomize))
     return specs
 
 
@@ -112,8 +120,9 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
     # not control code, so the wall clock is the right clock here.
     started = time.perf_counter()
     try:
+        extra = {"randomize": True} if spec.randomize else {}
         summary = load_mission(spec.mission)(spec.seed, spec.start_box, spec.heading,
-                                             spec.fault, spec.duration)
+                                             spec.fault, spec.duration, **extra)
         if not isinstance(summary, dict):
             raise TypeError(f"the mission returned {type(summary).__name__}, not a summary "
                             "dict")
@@ -228,6 +237,7 @@ def report(specs: Sequence[RunSpec], rows: Sequence[dict[str, Any]], *, workers:
         "fault": first.fault,
         "duration_s": first.duration,
         "mission": first.mission,
+        "randomize": first.randomize,
         "workers": None if cluster else workers,
         "cluster": cluster,
         "wall_time_s": round(wall_time_s, 3),
@@ -253,6 +263,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
                    help="run on this Dask distributed scheduler instead (extra: cluster)")
     p.add_argument("--duration", type=float, default=600.0, metavar="S",
                    help="simulated seconds per mission (default 600)")
+    p.add_argument("--randomize", action="store_true",
+                   help="each run's seed also draws the robot's physics and calibration "
+                        "(SPEC 6.3; the autonomy is not told)")
     p.add_argument("--mission", default=DEFAULT_MISSION, metavar="MODULE:FUNCTION",
                    help=f"the mission function (default {DEFAULT_MISSION})")
     p.add_argument("--json", action="store_true",
@@ -281,13 +294,17 @@ def main(args: argparse.Namespace) -> int:
         return 2
     err = Console(stderr=True)
     try:
-        if args.workers is not None and args.workers < 1:
-            raise CampaignError(f"--workers must be at least 1, got {args.workers}")
+        try:
+            check_runs(args.runs)
+            check_seed(args.seed, args.runs)
+            check_workers(args.workers)
+            check_duration(args.duration)
+        except ArgumentError as exc:
+            raise CampaignError(str(exc)) from exc
         if args.cluster is not None:
             check_cluster_address(args.cluster)
-        if not args.duration > 0:
-            raise CampaignError(f"--duration must be > 0, got {args.duration}")
-        specs = plan_runs(args.runs, args.seed, args.fault, args.duration, args.mission)
+        specs = plan_runs(args.runs, args.seed, args.fault, args.duration, args.mission,
+                          args.randomize)
         load_mission(args.mission)  # fail here, not in every worker
         workers = None if args.cluster else min(args.workers or default_workers(), len(specs))
         started = time.perf_counter()
@@ -348,7 +365,8 @@ def _print_table(doc: dict[str, Any], rows: Iterable[dict[str, Any]]) -> None:
     from rich.table import Table
 
     table = Table(title=f"ramp sim campaign: {doc['runs']} runs from seed {doc['seed']}, "
-                        f"fault {doc['fault']}")
+                        f"fault {doc['fault']}"
+                        + (", randomized" if doc.get("randomize") else ""))
     for name in ("seed", "box", "heading", "fault", "outcome", "delivered kg", "collisions",
                  "crater entries", "losses", "sim time s", "wall time s", "ok"):
         table.add_column(name, justify="left" if name in ("box", "fault", "outcome") else

@@ -31,6 +31,8 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
+from ramp.simulation.arguments import ArgumentError, check_seed, check_yaw
+
 
 class UsageError(Exception):
     """A bad argument, reported as `ramp sim: OPTION: what was expected` with exit 2."""
@@ -138,7 +140,16 @@ def parse_pose(text: str) -> tuple[float, float, float]:
         values = []
     if len(values) != 3 or not all(math.isfinite(v) for v in values):
         raise UsageError(f"--at: expected X,Y,YAW (metres, metres, degrees), got {text!r}")
+    checked(check_yaw, values[2], "--at")
     return values[0], values[1], values[2]
+
+
+def checked(check: Callable[..., None], *args: Any) -> None:
+    """Run one of `ramp.simulation.arguments`' checks; its complaint is a usage error."""
+    try:
+        check(*args)
+    except ArgumentError as exc:
+        raise UsageError(str(exc)) from exc
 
 
 def cmd_lidar(args: argparse.Namespace) -> int:
@@ -157,6 +168,7 @@ def _lidar(args: argparse.Namespace) -> int:
     from firmware_like.world_file import WorldFileError, load_world
 
     x, y, yaw = parse_pose(args.at)
+    checked(check_seed, args.seed)
     for name in ("tilt", "pan"):
         if not math.isfinite(getattr(args, name)):
             raise UsageError(f"--{name}: expected an angle in degrees")
@@ -293,6 +305,7 @@ def _perceive(args: argparse.Namespace) -> int:
         print(f"ramp sim perceive: needs the autonomy package: {exc}", file=sys.stderr)
         return 1
     x, y, yaw = parse_pose(args.at)
+    checked(check_seed, args.seed)
     seed = args.seed
     if args.world:
         try:

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from firmware_like.marte import MarteWorld
+from firmware_like.randomize import Randomization
 from firmware_like.world_file import load_world
 from ramp.autonomy.config import AutonomyConfig
 from ramp.autonomy.executive.autonomy import Autonomy
@@ -66,6 +67,7 @@ class MissionOptions:
     config: str | None = None  # autonomy.yaml; default the repository's
     realtime: bool = False
     port: int = 0  # with realtime: where the backend serves MCP
+    randomize: bool = False  # the seed also draws the robot's physics and calibration
 
 
 @dataclass
@@ -109,7 +111,8 @@ class MissionRun:
             raise ValueError(f"fault {o.fault!r} is not one of {', '.join(FAULTS)}")
         if not (math.isfinite(o.duration) and o.duration > 0):
             raise ValueError(f"duration {o.duration!r} must be a positive number of seconds")
-        self.world = make_world(o)
+        self.randomization = Randomization.draw(o.seed) if o.randomize else None
+        self.world = make_world(o, self.randomization)
         self.config = mission_config(load_autonomy_config(o.config), o.duration)
         self.error = ""
         self.stop_requested = False  # `request_stop()`: end the run at the next tick
@@ -130,7 +133,8 @@ class MissionRun:
             clock = MonotonicClock()
         self.backend = SimBackend(self.world, clock=clock, port=o.port)
         self.rig = Rig(self.world, self.config, seed=o.seed, fault=o.fault,
-                       run_length_s=o.duration, backend=self.backend, stream=False)
+                       run_length_s=o.duration, backend=self.backend, stream=False,
+                       randomization=self.randomization)
         self.autonomy = Autonomy(self.rig.scheduler, self.rig.perception, self.config,
                                  self.backend.address, localize=self.localize,
                                  detect=self.detect)
@@ -238,6 +242,8 @@ class MissionRun:
             "last_problem": ctx.last_problem if ctx is not None else "",
             "rtf": round(sim_s / self.wall_s, 1) if self.wall_s > 0 else None,
         }
+        if self.randomization is not None:
+            doc["randomized"] = self.randomization.as_dict()
         if self.error:
             doc["error"] = self.error
         return doc
@@ -269,15 +275,17 @@ class MissionRun:
         self._notify("sampled", now)
 
 
-def make_world(o: MissionOptions) -> MarteWorld:
-    """The arena: a world file (its start unless a box or heading is given), or the seed's."""
+def make_world(o: MissionOptions, randomization: Randomization | None = None) -> MarteWorld:
+    """The arena: a world file (its start unless a box or heading is given), or the seed's;
+    with `randomization`, a robot that departs from the model by its draws."""
+    params = randomization.marte_params() if randomization is not None else None
     if o.start_box is not None and o.start_box not in START_BOXES:
         raise ValueError(f"start box {o.start_box!r} is not one of {', '.join(START_BOXES)}")
     if o.heading is not None and o.heading not in HEADINGS:
         raise ValueError(f"heading {o.heading!r} is not one of {HEADINGS}")
     if o.world is None:
         return MarteWorld.seeded(o.seed, o.start_box,
-                                 None if o.heading is None else float(o.heading))
+                                 None if o.heading is None else float(o.heading), params=params)
     layout = load_world(o.world)
     if o.start_box is not None or o.heading is not None:
         from dataclasses import replace
@@ -289,7 +297,14 @@ def make_world(o: MissionOptions) -> MarteWorld:
         heading = float(o.heading) if o.heading is not None else (
             old.heading_deg if old is not None else 0.0)
         layout = replace(layout, start=StartSpec(box, heading))
-    return MarteWorld(seed=o.seed, layout=layout)
+    world = MarteWorld(params, seed=o.seed, layout=layout)
+    touching = world.contacts()
+    if touching:  # a start in contact would be a collision the summary never counts
+        s = world.start_pose
+        raise ValueError(f"{o.world}: the start at x {s.x:.3f}, y {s.y:.3f}, yaw "
+                         f"{s.yaw_deg:.1f} touches {', '.join(touching)}; expected a start "
+                         "clear of the walls and obstacles")
+    return world
 
 
 def mission_config(config: AutonomyConfig, duration: float) -> AutonomyConfig:
@@ -303,10 +318,10 @@ def mission_config(config: AutonomyConfig, duration: float) -> AutonomyConfig:
 
 
 def run_mission(seed: int, start_box: str, heading: int, fault: str = "none",
-                duration: float = 600.0) -> dict[str, Any]:
+                duration: float = 600.0, randomize: bool = False) -> dict[str, Any]:
     """One simulated mission's SPEC 6.3 summary, for `ramp sim campaign`."""
     run = MissionRun(MissionOptions(seed=seed, start_box=start_box, heading=heading,
-                                    fault=fault, duration=duration))
+                                    fault=fault, duration=duration, randomize=randomize))
     return run.run()
 
 

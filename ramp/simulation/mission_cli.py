@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import math
 import signal
 import sys
 from pathlib import Path
@@ -49,6 +48,11 @@ def add_mission_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser])
                             "layout")
     p.add_argument("--fault", choices=("none", "gyro-drift", "imu-shift"), default="none",
                    help="IMU fault to inject (SPEC 6.2; default none)")
+    p.add_argument("--randomize", action="store_true",
+                   help="the seed also draws the robot's physics and calibration: skid "
+                        "efficiency, traction, wheel speeds, the LIDAR mount, a gyro bias, "
+                        "the load cell's gain, battery sag (SPEC 6.3); printed in the "
+                        "summary, not told to the autonomy")
     p.add_argument("--duration", type=float, default=600.0, metavar="S",
                    help="the run's length in simulated seconds (default 600)")
     p.add_argument("--config", metavar="FILE",
@@ -92,12 +96,15 @@ def cmd_mission(args: argparse.Namespace) -> int:
 def _mission(args: argparse.Namespace) -> int:
     from firmware_like.world_file import WorldFileError
     from ramp.errors import ConfigErrors
+    from ramp.simulation.arguments import ArgumentError, check_duration, check_seed
     from ramp.simulation.campaign import combination
     from ramp.simulation.mission import MissionOptions, MissionRun
 
-    if not (math.isfinite(args.duration) and args.duration > 0):
-        raise UsageError(f"--duration: expected a positive number of seconds, got "
-                         f"{args.duration:g}")
+    try:
+        check_seed(args.seed)
+        check_duration(args.duration)
+    except ArgumentError as exc:
+        raise UsageError(str(exc)) from exc
     if args.port is not None and not args.realtime:
         raise UsageError("--port: only with --realtime (the virtual-time run serves MCP on "
                          "a loopback port of its own)")
@@ -110,7 +117,7 @@ def _mission(args: argparse.Namespace) -> int:
         box, heading = combination(args.seed)
     options = MissionOptions(seed=args.seed, start_box=box, heading=heading, fault=args.fault,
                              duration=args.duration, world=args.world, config=args.config,
-                             realtime=args.realtime,
+                             realtime=args.realtime, randomize=args.randomize,
                              port=(REALTIME_PORT if args.port is None else args.port)
                              if args.realtime else 0)
     logging.basicConfig(level=logging.ERROR, format="%(levelname)s %(name)s: %(message)s")
@@ -242,6 +249,9 @@ def describe(s: dict[str, Any]) -> list[str]:
             out.append(f"  trace         {s['trace']}: refereed {r['collisions']} "
                        f"collision(s), {r['crater_entries']} crater entr(y/ies), "
                        f"{r['delivered_at_collector_kg']:.2f} kg at the collector")
+    if s.get("randomized"):
+        out.append("  randomized    " + ", ".join(f"{k} {v:g}" for k, v in
+                                                  s["randomized"].items()))
     for key in ("plot", "record"):
         if s.get(key):
             out.append(f"  {key:13s} {s[key]}")

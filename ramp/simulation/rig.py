@@ -47,6 +47,7 @@ from firmware_like.hokuyo import HokuyoEmulator
 from firmware_like.imu import FAULTS, ImuEmulator
 from firmware_like.lidar_view import LidarPose, LidarView, rotation_zyx
 from firmware_like.marte import MarteWorld
+from firmware_like.randomize import Randomization
 from firmware_like.servo import PanTiltEmulator, gimbal_emulator
 from ramp.autonomy.config import AutonomyConfig, load_config
 from ramp.autonomy.hal import driver_class
@@ -103,7 +104,7 @@ class Rig:
                  seed: int = 0, fault: str = "none", run_length_s: float = 600.0,
                  shift_window_s: tuple[float, float] | None = None,
                  backend: SimBackend | None = None, rate_hz: float = 100.0,
-                 stream: bool = True) -> None:
+                 stream: bool = True, randomization: Randomization | None = None) -> None:
         if fault not in FAULTS:
             raise ValueError(f"unknown fault {fault!r} (expected one of: {', '.join(FAULTS)})")
         self.world = world
@@ -128,8 +129,12 @@ class Rig:
             self._tasks.append(self.scheduler.add_task("sim.world", rate, self._step_world))
         self.gimbal_emulator: PanTiltEmulator = gimbal_emulator(self.clock, cfg.gimbal)
         m = cfg.lidar.mount
-        self.view = LidarView.of(world, replace(LidarParams(), mount_x=m.x, mount_y=m.y,
-                                                mount_z=m.z), seed=seed)
+        true_mount = replace(LidarParams(), mount_x=m.x, mount_y=m.y, mount_z=m.z)
+        imu_model = None
+        if randomization is not None:  # the true mount and gyro; the autonomy keeps its own
+            true_mount = randomization.lidar_params(true_mount)
+            imu_model = randomization.imu_model()
+        self.view = LidarView.of(world, true_mount, seed=seed)
         self._gimbal_times: deque[float] = deque()
         self._gimbal_angles: deque[tuple[float, float]] = deque()
         self.lidar_emulator = HokuyoEmulator(self.clock, self.range_source, port=0)
@@ -138,7 +143,8 @@ class Rig:
         window = shift_window_s if shift_window_s is not None else shift_window(run_length_s)
         self.imu_emulator = ImuEmulator(self.clock, lambda: ImuTruthAdapter(world), seed=seed,
                                         fault=fault, data_interval_ms=cfg.imu.data_interval_ms,
-                                        mount=cfg.imu.mount, shift_window_s=window)
+                                        mount=cfg.imu.mount, shift_window_s=window,
+                                        model=imu_model)
         # -- the autonomy's side ------------------------------------------------------------
         imu = driver_class("imu", "sim")(replace(cfg.imu, driver="sim"),
                                          emulator=self.imu_emulator)

@@ -2,8 +2,9 @@
 5.35; SPEC 6.3).
 
 The machine decides *what* to do next; activities (Executive layer, `ramp.autonomy.executive`)
-decide *how*. Part of the removable autonomy: it imports `transitions`, `ramp.autonomy`'s
-planning types and `ramp.errors`, never the backend.
+decide *how*. Part of the removable autonomy: it imports `transitions` and `ramp.errors`,
+never the backend, and `ramp.autonomy`'s planning types for type checking only (the
+executive imports the machine, so the machine does not import the autonomy back).
 
 The flow (`table.py`; drawn by `python -m ramp.statemachine --mermaid`):
 

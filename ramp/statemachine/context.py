@@ -14,18 +14,19 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from ramp.autonomy.planning import (
-    ArenaMap,
-    DigSites,
-    DigSpot,
-    Disc,
-    DockApproach,
-    Planner,
-    PlanResult,
-    Pose,
-)
+if TYPE_CHECKING:  # for the field types only: the machine runs without the autonomy loaded
+    #   (the executive imports the machine; the machine must not import it back)
+    from ramp.autonomy.planning import (
+        DigSites,
+        DigSpot,
+        Disc,
+        DockApproach,
+        Planner,
+        PlanResult,
+        Pose,
+    )
 
 
 @dataclass
@@ -59,17 +60,25 @@ class Estimates:
     write them too.
     """
 
-    trip_s: float = 60.0  # one way between the collector and a digging spot, planning included
+    trip_s: float = 60.0  # out, from the collector to a digging spot, planning included
     dock_deposit_s: float = 60.0  # dock, deposit and decouple at the collector
     min_dig_s: float = 30.0  # the shortest dig worth a trip
+    #: Back, from a digging spot to the collector's approach. Measured apart from the way
+    #: out: the way home ends with the docking approach and is often the longer one, and
+    #: twice the longer of the two made a second cycle look 60 s longer than it was.
+    home_s: float = 60.0
 
     def return_s(self) -> float:
         """From the digging region to regolith out of the bin."""
-        return self.trip_s + self.dock_deposit_s
+        return self.home_s + self.dock_deposit_s
+
+    def overhead_s(self) -> float:
+        """What a cycle costs besides its dig: out, back, dock, deposit and decouple."""
+        return self.trip_s + self.home_s + self.dock_deposit_s
 
     def cycle_s(self) -> float:
         """From the collector out to dig (at least `min_dig_s`) and back, deposited."""
-        return 2.0 * self.trip_s + self.min_dig_s + self.dock_deposit_s
+        return self.overhead_s() + self.min_dig_s
 
     @staticmethod
     def blend(old: float, measured: float) -> float:
@@ -122,7 +131,3 @@ class MissionContext:
     def pose_is_confident(self, threshold: float) -> bool:
         """True when there is a pose and the localizer trusts it at least `threshold`."""
         return self.pose is not None and self.pose_confidence >= threshold
-
-    def detected_map(self) -> ArenaMap:
-        """The arena with what was detected, for a planner."""
-        return ArenaMap(obstacles=tuple(self.rocks) + tuple(self.craters))

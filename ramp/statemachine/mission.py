@@ -166,7 +166,7 @@ class Mission:
         cfg = self.config
         self.context.budget = TimeBudget(now, cfg.duration_s, cfg.end_margin_s)
         self.context.estimates = Estimates(cfg.trip_estimate_s, cfg.dock_deposit_estimate_s,
-                                           cfg.min_dig_s)
+                                           cfg.min_dig_s, home_s=cfg.trip_estimate_s)
         self._now = now
         self._fire("start", f"run of {cfg.duration_s:g} s")
 
@@ -443,7 +443,7 @@ class Mission:
                 self._home_since = now
         elif dest == "dock":
             if self._home_since is not None:
-                est.trip_s = Estimates.blend(est.trip_s, now - self._home_since)
+                est.home_s = Estimates.blend(est.home_s, now - self._home_since)
                 self._home_since = None
             if self._dock_since is None:
                 self._dock_since = now

@@ -11,9 +11,12 @@ An activity (`ramp.statemachine.activity.Activity`) returns one `Status` from ev
     Status.operator(reason)   control_taken   someone else has control (`not_owner`)
     Status.fault(reason)      fault           the robot or the link failed: an MCP error,
                                               a `fault` answer, a watchdog trip
+    Status.needs_operator(r)  needs_operator  a latched fault only an operator may clear
+                                              (a stalled lift): stop and wait, no retry
 
 `Status.from_mcp_error(code, detail)` maps an MCP error response to the right status, so
-every activity treats `not_owner`, `interlocked` and `fault` the same way.
+every activity treats `not_owner` (and `interlocked`: another module's state holds this one
+back, SPEC 11) and `fault` the same way.
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ class StatusKind(Enum):
     LOST = "lost"
     OPERATOR = "operator"
     FAULT = "fault"
+    NEEDS_OPERATOR = "needs_operator"
 
 
 #: The machine's trigger for each status (RUNNING fires nothing).
@@ -38,6 +42,7 @@ TRIGGER_OF: dict[StatusKind, str] = {
     StatusKind.LOST: "lost",
     StatusKind.OPERATOR: "control_taken",
     StatusKind.FAULT: "fault",
+    StatusKind.NEEDS_OPERATOR: "needs_operator",
 }
 
 
@@ -73,17 +78,17 @@ class Status:
         return cls(StatusKind.FAULT, _need(reason))
 
     @classmethod
+    def needs_operator(cls, reason: str) -> Status:
+        return cls(StatusKind.NEEDS_OPERATOR, _need(reason))
+
+    @classmethod
     def from_mcp_error(cls, code: str, detail: str = "") -> Status:
         """An MCP error response (`MODULE:DEVICE.error=(code,detail)`) as a status:
-        `not_owner` is the operator taking over (SPEC 2.2); `interlocked` is a rule of the
-        robot's refusing this motion now (SPEC 11, the detail starts with the rule's name):
-        the step failed this way, so the mission stops, retries it a bounded number of times
-        (the rule may have cleared) and then waits for the operator; anything else a fault."""
+        `not_owner` is the operator taking over (SPEC 2.2), `interlocked` the same (the
+        operator's setup holds the robot back, SPEC 11), anything else a fault."""
         text = f"{code}: {detail}" if detail else code
-        if code == "not_owner":
+        if code in ("not_owner", "interlocked"):
             return cls.operator(text)
-        if code == "interlocked":
-            return cls.failed(text)
         return cls.fault(text)
 
     @property

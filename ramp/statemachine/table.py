@@ -220,6 +220,9 @@ _BEFORE_GUARD: list[Row] = [
     *_rows("finished", "stop", "relevel", "must_relocalize", before="count_relocalize"),
     *_rows("finished", "stop", "resume", before="count_retry"),
     *_rows(PROBLEMS, "stop", "waiting_for_operator"),
+    # a latched fault (a stalled lift): only an operator may clear it; no retry, no reset
+    *_rows("needs_operator", ("acquire_control", *RUN, *RECOVERY, "stop"),
+           "waiting_for_operator", before="note_problem"),
     *_rows("finished", "relevel", "rescan"),
     *_rows("finished", "rescan", "relocalize"),
     *_rows("finished", "relocalize", "resume", "pose_confident"),

@@ -65,3 +65,10 @@ def breaks_on_seed_13(seed: int, start_box: str, heading: int, fault: str,
     if seed == 14:
         return {"outcome": "completed"}  # no delivered_kg, no counters: not a summary
     return arithmetic(seed, start_box, heading, fault, math.floor(duration))
+
+
+def says_randomized(seed: int, start_box: str, heading: int, fault: str, duration: float,
+                    randomize: bool = False) -> dict[str, Any]:
+    """Delivers 20 kg when told to randomize, 0 otherwise."""
+    return summary(seed, start_box, heading, fault, "completed", 20.0 if randomize else 0.0,
+                   duration)

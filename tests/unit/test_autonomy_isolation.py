@@ -118,3 +118,20 @@ def test_at_run_time_the_backend_and_its_commands_load_no_autonomy_module() -> N
     loaded = loaded_by(BACKEND_ALONE)
     assert "ramp.config" in loaded and "ramp.shell" in loaded
     assert hits(loaded, AUTONOMY) == []
+
+
+def test_the_state_machine_does_not_import_the_autonomy_back() -> None:
+    # The executive imports the machine; a machine importing the autonomy's planner made a
+    # cycle (ramp.statemachine <-> ramp.autonomy). Its context names planning types for
+    # type checking only, so loading the machine loads nothing of the autonomy.
+    loaded = loaded_by("import json, sys\nimport ramp.statemachine\n"
+                       "print(json.dumps(sorted(sys.modules)))")
+    assert "ramp.statemachine.mission" in loaded
+    assert hits(loaded, ("ramp.autonomy",)) == []
+    for path in (RAMP / "statemachine").rglob("*.py"):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in tree.body:  # module level, outside `if TYPE_CHECKING:`
+            if isinstance(node, ast.ImportFrom | ast.Import):
+                names = [node.module or ""] if isinstance(node, ast.ImportFrom) else [
+                    a.name for a in node.names]
+                assert hits(set(names), ("ramp.autonomy",)) == [], path

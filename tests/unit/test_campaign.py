@@ -118,7 +118,14 @@ def test_table_names_every_column_and_prints_the_success_rate(
     (["--runs", "3", "--mission", "tests.unit.nothing_here:run"], "cannot import"),
     (["--runs", "3", "--mission", "tests.unit.campaign_missions:nope"], "no function nope"),
     (["--runs", "3", "--mission", "no_colon"], "module:function"),
-    (["--runs", "0", "--mission", CHEAP], "--runs must be at least 1"),
+    (["--runs", "0", "--mission", CHEAP], "--runs: expected 1-100000"),
+    (["--runs", "1000000000000", "--mission", CHEAP], "--runs: expected 1-100000"),
+    (["--runs", "2", "--seed", "-1", "--mission", CHEAP], "--seed: expected a whole number"),
+    (["--runs", "3", "--seed", "4294967294", "--mission", CHEAP], "(with --runs 3)"),
+    (["--runs", "2", "--cluster", "tcp://[::1", "--mission", CHEAP], "--cluster 'tcp://[::1'"),
+    (["--runs", "2", "--cluster", "tcp://host:99999", "--mission", CHEAP], "--cluster 'tcp://host:99999'"),
+    (["--runs", "2", "--duration", "1e308", "--mission", CHEAP], "--duration: expected"),
+    (["--runs", "2", "--duration", "nan", "--mission", CHEAP], "--duration: expected"),
     (["--runs", "2", "--cluster", "localhost:8786", "--mission", CHEAP], "tcp://HOST:PORT"),
     (["--runs", "2", "--cluster", "tcp://localhost", "--mission", CHEAP], "no port"),
     (["--runs", "2", "--cluster", "tcp://::1:8786", "--mission", CHEAP], "in brackets"),
@@ -138,3 +145,15 @@ def test_registers_under_the_sim_subcommands() -> None:
         (5, 0, "none", None, None, False)
     assert args.mission == "ramp.simulation.mission:run_mission" and callable(args.func)
     assert load_mission(CHEAP) is campaign_missions.arithmetic
+
+
+def test_randomize_reaches_every_run_and_the_report() -> None:
+    from ramp.simulation.campaign import plan_runs, report, run_one
+
+    mission = "tests.unit.campaign_missions:says_randomized"
+    specs = plan_runs(3, 5, mission=mission, randomize=True)
+    rows = [run_one(s) for s in specs]
+    assert [r["delivered_kg"] for r in rows] == [20.0, 20.0, 20.0]
+    assert report(specs, rows, workers=1, cluster=None, wall_time_s=0.0)["randomize"] is True
+    plain = plan_runs(1, 5, mission=mission)
+    assert run_one(plain[0])["delivered_kg"] == 0.0

@@ -120,7 +120,8 @@ def test_an_operator_takeover_is_seen_as_operator_and_stops_odometry(bench: Benc
     op.stop()
 
 
-def test_a_refusal_by_an_interlock_fails_the_step_naming_the_rule(bench: Bench) -> None:
+def test_a_refusal_by_an_interlock_is_handled_like_not_owner_naming_the_rule(
+        bench: Bench) -> None:
     """MARTE's shipped chain_needs_ladder_down: the chain is refused with the bin up."""
     robot = bench.robot
     bench.world.lift_pos = 0.8
@@ -130,7 +131,7 @@ def test_a_refusal_by_an_interlock_fails_the_step_naming_the_rule(bench: Bench) 
     robot.send("ble:chain.vel=(100)")
     bench.run(0.1)
     problem = robot.problem()
-    assert problem is not None and problem.kind is StatusKind.FAILED
+    assert problem is not None and problem.kind is StatusKind.OPERATOR
     assert problem.reason.startswith("interlocked: chain_needs_ladder_down is active")
     assert "ble:chain.vel=(100)" in problem.reason
     assert not robot.moving  # it stops meaning to move, as after not_owner

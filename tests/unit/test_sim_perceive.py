@@ -113,6 +113,9 @@ def test_an_imu_shift_during_the_sweep_is_caught_while_parked_and_everything_tak
 @pytest.mark.parametrize("args, message", [
     (["--at", "1,2"], "--at: expected X,Y,YAW"),
     (["--at", "0.1,0.1,0"], "outside the"),
+    (["--at", "0.8,2.9,1e308"], "--at: expected a yaw in degrees"),
+    (["--at", "0.8,2.9,0", "--seed", "-1"], "--seed: expected a whole number"),
+    (["--at", "0.8,2.9,0", "--seed", "99999999999"], "--seed: expected a whole number"),
     (["--at", "1,1,0", "--world", "/nonexistent.yaml"], "nonexistent.yaml"),
 ])
 def test_bad_input_exits_2_saying_what_was_expected(args: list[str], message: str,

@@ -48,8 +48,10 @@ def test_a_run_follows_figure_5_35_and_cycles_until_the_time_is_nearly_out(
     assert world.t < ctx.budget.end_s and world.bin_kg < 0.05
     # no spot dug twice; the robot stopped at the end and nowhere else
     ys = [spot.pose.y for spot in ctx.dig_spots_done]
-    assert len(ys) == ctx.deposits and len(set(ys[:4])) == 4
-    assert world.stops == [world.t]
+    # (the last load may come home before its dig finished: the time left sent it home)
+    assert ctx.deposits - 1 <= len(ys) <= ctx.deposits and len(set(ys[:4])) == 4
+    home_early = [c.t for c in run.changes if c.trigger == "head_home"]  # the dig stopped
+    assert world.stops == sorted(home_early + [world.t])
     _never_drove_while_lost(run)
     # one log line per change, in the promised format
     lines = [r.getMessage() for r in caplog.records if r.name == "ramp.statemachine"]
@@ -63,6 +65,7 @@ def test_the_machine_measures_its_legs_for_the_end_decisions() -> None:
     # configured guesses of 60 s come down towards what the world takes (about 16 s a trip,
     # under 10 s at the collector), halfway per measurement, never below one
     assert 16.0 < est.trip_s < 30.0 and 5.0 < est.dock_deposit_s < 20.0
+    assert 16.0 < est.home_s < 30.0  # the way home is measured on its own
 
 
 def test_near_the_end_a_loaded_robot_heads_home_and_delivers_its_last_load() -> None:
@@ -400,9 +403,8 @@ def test_statuses_map_to_triggers_and_mcp_errors() -> None:
     assert Status.running().trigger is None and Status.done().trigger == "finished"
     assert Status.from_mcp_error("not_owner", "operator holds control").trigger == \
         "control_taken"
-    refused = Status.from_mcp_error("interlocked", "chain_needs_ladder_down is active")
-    assert refused.trigger == "failed"
-    assert refused.reason == "interlocked: chain_needs_ladder_down is active"
+    assert Status.from_mcp_error("interlocked", "lift raised").trigger == "control_taken"
+    assert Status.needs_operator("lift stalled").trigger == "needs_operator"
     fault = Status.from_mcp_error("not_attached", "ble")
     assert fault.trigger == "fault" and fault.reason == "not_attached: ble"
     with pytest.raises(ValueError, match="says why"):

@@ -84,6 +84,14 @@ def test_any_layout_inside_the_arena_is_accepted() -> None:
     ("start: {box: left}\n", "w.yaml:1: start.heading: expected one of 0, 90, 180, 270"),
     ("start: {box: left, heading: 0, x: 0.1, y: 3.0}\n",
      "w.yaml:1: start: the footprint at x 0.1, y 3, yaw 0 is not wholly inside"),
+    ("start:\n  {box: left, heading: 0, x: 0.8, y: 2.9}\nrocks: [{x: 1.2, y: 2.7, d: 0.25}]\n",
+     "w.yaml:1: start: the footprint at x 0.8, y 2.9, yaw 0 overlaps rocks[0] at x 1.2"),
+    ("start: {box: left, heading: 0, x: 0.8, y: 2.9}\ncraters: [{x: 0.5, y: 3, d: 0.2}]\n",
+     "w.yaml:1: start: the footprint at x 0.8, y 2.9, yaw 0 overlaps craters[0]"),
+    ("start: {box: left, heading: 90, x: 0.6, y: 3.28}\n",
+     "w.yaml:1: start: the footprint at x 0.6, y 3.28, yaw 90 touches a wall"),
+    ("start: {box: right, heading: 0}\nrocks: [{x: 1.4, y: 0.5, d: 0.3}]\n",
+     "w.yaml:1: start: rocks[0] at x 1.4, y 0.5 reaches into the right start box"),
     ("rocks:\n  - {x: 7.3, y: 1.0, d: 0.3}\n",
      "w.yaml:2: rocks[0]: the disc at x 7.3, y 1, d 0.3 is not wholly inside"),
     ("rocks: {x: 1, y: 1, d: 0.2}\n", "w.yaml:1: rocks: expected a list of {x, y, d}"),
@@ -114,3 +122,16 @@ def test_every_mistake_is_reported_in_one_pass() -> None:
 def test_an_unreadable_file_is_an_error_naming_it(tmp_path: Path) -> None:
     with pytest.raises(WorldFileError, match="nope.yaml: cannot read"):
         load_world(tmp_path / "nope.yaml")
+
+
+def test_a_start_box_given_over_a_world_file_may_not_start_on_an_obstacle(
+        tmp_path: Path) -> None:
+    # The file's left box is clear; --start-box right puts the seed's pose on the rock. The
+    # physics would push the robot out unseen and the trace's referee count a collision.
+    from ramp.simulation.mission import MissionOptions, make_world
+
+    world = tmp_path / "w.yaml"
+    world.write_text("start: {box: left, heading: 0}\nrocks: [{x: 0.7, y: 0.9, d: 0.3}]\n")
+    with pytest.raises(ValueError, match="touches rock 0"):
+        make_world(MissionOptions(world=str(world), start_box="right", heading=0))
+    assert make_world(MissionOptions(world=str(world))).contacts() == []

@@ -3,11 +3,13 @@
 At the digging spot (facing the far wall): `ble:lift.pos=(0.0)` lowers the ladder into the
 regolith (0 is retracted, the digging position, SPEC 2.1); once the lift reads down, the chain
 runs at `chain_speed_pct` and the robot creeps forward at `creep_speed_pct` for the trench's
-`creep_m`, then digs standing. It stops at `dig_target_kg` in the bin (`ble:load.kg`, polled)
-or after `dig_max_s`, stops the BLE (chain, and the lift's hold, so the watchdog has
-nothing left to guard) and the wheels, and marks the trench dug so no later
-spot repeats it. A chain that brings nothing in (outside the digging region, or the lift not
-down) fails the step instead of spinning for the whole run.
+`creep_m`, then digs standing. It stops at `dig_target_kg` in the bin (`ble:load.kg`, polled:
+a full bin), after the dig the run's time allows (`ramp.statemachine.productivity`: the
+fewest cycles that dig the most, the last deposit before the end) or after `dig_max_s`,
+stops the BLE (chain, and the lift's hold, so the watchdog has nothing left to guard) and
+the wheels, and marks the trench dug so no later spot repeats it. A chain that brings
+nothing in (outside the digging region, or the lift not down) fails the step instead of
+spinning for the whole run.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import math
 from ramp.autonomy.executive.step import Step
 from ramp.autonomy.odometry import between
 from ramp.statemachine import Status
+from ramp.statemachine.productivity import plan_dig
 
 LOWERED = 0.05  # lift position that counts as down
 LOWER_TIMEOUT_S = 15.0  # a full stroke takes about 10 s (SPEC 2.1)
@@ -29,6 +32,7 @@ class Excavate(Step):
         robot = self.kit.robot
         self.phase = "lowering"
         self.dig_began = math.nan
+        self.dig_s = math.inf
         self.load0 = 0.0
         self.crept = 0.0
         self.creeping = False
@@ -45,6 +49,7 @@ class Excavate(Step):
                 self.phase = "digging"
                 self.dig_began = now
                 self.load0 = robot.load_kg
+                self.dig_s = self._plan(now)
                 robot.send(f"ble:chain.vel=({round(s.chain_speed_pct)})")
                 self.creeping = True
             elif now - self.started_at > LOWER_TIMEOUT_S:
@@ -64,13 +69,23 @@ class Excavate(Step):
             self.sent_at = now
         robot.moving = True  # the chain runs: keep the watchdog fed
         digging_s = now - self.dig_began
-        if load >= s.dig_target_kg or digging_s >= s.dig_max_s:
+        if load >= s.dig_target_kg or digging_s >= min(self.dig_s, s.dig_max_s):
             return self._finish(load, digging_s)
         if digging_s > NOTHING_IN_S and load - self.load0 < 0.2:
             robot.send("ble:ble.stop=()")
             robot.halt_base()
             return Status.failed(f"no regolith came in after {digging_s:.0f} s of digging")
         return Status.running()
+
+    def _plan(self, now: float) -> float:
+        """This dig's length: the largest share of the run's time left that still lets the
+        last deposit land before the end."""
+        ctx, s = self.ctx, self.kit.settings
+        rate = float(ctx.notes.get("dig_rate_kg_s", s.dig_rate_kg_s))
+        load0 = self.load0 if math.isfinite(self.load0) else 0.0
+        full_s = max(0.0, s.dig_target_kg - load0) / max(rate, 1e-3)
+        b = ctx.budget
+        return plan_dig(b.left(now), b.margin_s, ctx.estimates, full_s).dig_s
 
     def end(self) -> None:
         # Left before the target (the run's end sent it home, a fault, an operator): a spot
@@ -84,6 +99,10 @@ class Excavate(Step):
         robot.halt_base()
         robot.moving = False
         self._mark_dug()
+        if digging_s > NOTHING_IN_S and math.isfinite(self.load0):
+            rate = (load - self.load0) / digging_s
+            if rate > 0.0:
+                self.ctx.notes["dig_rate_kg_s"] = rate
         return Status.done(f"{load:.1f} kg in the bin after {digging_s:.0f} s of digging")
 
     def _mark_dug(self) -> None:

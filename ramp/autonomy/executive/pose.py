@@ -12,6 +12,14 @@ tracker has no pose.
 `tick(now, dt)` runs after odometry's and the AHRS's tasks and writes `ctx.pose`,
 `ctx.pose_confidence` and `ctx.pose_time_s` of the `MissionContext` it is bound to, every
 tick, before the mission's own tick reads them.
+
+Odometry's distances are scaled by `distance_scale`, learnt from the fixes: a robot whose
+traction or wheel speeds are not the model's (`ramp sim mission --randomize`, or real ground)
+covers more or less ground than its commands say. At each confident fix after a drive of at
+least `SCALE_MIN_M`, the fix's displacement from the previous fix, projected on the
+dead-reckoned one, over the dead-reckoned one's length, is how far off the scale was; the
+scale moves halfway there (geometrically), within `SCALE_LIMITS`. Headings come from the gyro,
+so the dead-reckoned path has the right shape and only its length is in question.
 """
 
 from __future__ import annotations
@@ -22,6 +30,10 @@ from ramp.autonomy.odometry import Odometry, Pose2, between
 from ramp.autonomy.perception.ahrs import Ahrs
 from ramp.autonomy.planning import Pose
 from ramp.statemachine import MissionContext
+
+SCALE_MIN_M = 0.5  # a shorter drive says too little about the scale (fixes are +-2 cm)
+SCALE_MIN_CONFIDENCE = 0.8  # only fixes this sure teach the scale
+SCALE_LIMITS = (0.75, 1.25)  # traction +-15 % and wheel speeds +-5 %, with room
 
 
 class PoseTracker:
@@ -47,6 +59,8 @@ class PoseTracker:
         self.fixes = 0
         self._odom: Pose2 = odometry.pose
         self._gyro: float | None = None
+        self.distance_scale = 1.0  # ground covered per metre odometry says (learnt)
+        self._fixed_at: Pose2 | None = None  # the last fix, for the next scale estimate
 
     # -- what the localizer and the activities tell it -----------------------------------------
     def bind(self, ctx: MissionContext) -> None:
@@ -55,6 +69,7 @@ class PoseTracker:
 
     def fix(self, now: float, x: float, y: float, yaw: float, confidence: float) -> None:
         """A localization from scans taken at `now` with the robot standing still."""
+        self._learn_scale(float(x), float(y), float(confidence))
         self._pose = (float(x), float(y), math.remainder(float(yaw), 2 * math.pi))
         self._lost = False
         self._prior_ok = True
@@ -63,6 +78,7 @@ class PoseTracker:
         self.distance_m = self.turned_rad = 0.0
         self.lost_reason = ""
         self.fixes += 1
+        self._fixed_at = self._pose if confidence >= SCALE_MIN_CONFIDENCE else None
         self._reference()
         self._publish()
 
@@ -71,6 +87,7 @@ class PoseTracker:
         the next try), or an operator who may have moved the robot anywhere (`keep_prior`
         False: nothing is known but the gyro's heading)."""
         self._lost = True
+        self._fixed_at = None  # a drive from an unknown start teaches nothing
         self._prior_ok = self._prior_ok and keep_prior
         self.fix_confidence = 0.0
         self.lost_reason = reason
@@ -105,6 +122,8 @@ class PoseTracker:
     def tick(self, now: float, dt: float) -> None:
         odom = self.odometry.pose
         fwd, left, odom_turn = between(self._odom, odom)
+        fwd *= self.distance_scale
+        left *= self.distance_scale
         self._odom = odom
         gyro = self._gyro_yaw()
         turn = odom_turn
@@ -122,6 +141,21 @@ class PoseTracker:
         self._publish()
 
     # -- inside -------------------------------------------------------------------------------
+    def _learn_scale(self, x: float, y: float, confidence: float) -> None:
+        """Compare the fix with where dead reckoning put the robot since the last fix."""
+        start, dead = self._fixed_at, self._pose
+        if start is None or dead is None or self._lost or confidence < SCALE_MIN_CONFIDENCE:
+            return
+        dx, dy = dead[0] - start[0], dead[1] - start[1]
+        length = math.hypot(dx, dy)
+        if length < SCALE_MIN_M:
+            return
+        ratio = ((x - start[0]) * dx + (y - start[1]) * dy) / (length * length)
+        if not math.isfinite(ratio) or ratio <= 0.0:
+            return
+        lo, hi = SCALE_LIMITS
+        self.distance_scale = min(hi, max(lo, self.distance_scale * math.sqrt(ratio)))
+
     def _gyro_yaw(self) -> float | None:
         ahrs = self.ahrs
         if ahrs is None or not ahrs.settled:

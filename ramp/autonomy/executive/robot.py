@@ -11,7 +11,7 @@ Everything the activities send to the robot goes through here, so three rules ho
   silent and the robot stops.
 - **Every error answer is kept**, stamped with the activity it belongs to (`begin()` opens a
   new one), so an activity sees only its own: `problem()` turns the first into a `Status`
-  (`not_owner` -> operator, `interlocked` -> failed, anything else -> fault). Answers to an
+  (`not_owner` and `interlocked` -> operator, anything else -> fault). Answers to an
   earlier activity's commands are logged, not blamed on the next. A refusal by an interlock
   (`interlocked`, SPEC 11) is handled like `not_owner`: the executive stops meaning to move
   (the rule stopped what ran there) and says which rule refused what.
@@ -77,7 +77,13 @@ class RobotLink:
         self._errors.clear()
 
     def problem(self) -> Status | None:
-        """The first error answer to this activity's commands, as a Status; None if none."""
+        """The first error answer to this activity's commands, as a Status; a latched
+        fault the backend reports (`ble:lift.stalled`) as one for the operator; None if
+        none."""
+        if self.value("ble:lift.stalled", 0.0) > 0.5:
+            return Status.needs_operator(
+                "the lift stalled (ble:lift.stalled): the mission stopped and waits for an "
+                "operator to clear it with ble:lift.reset=() and release control")
         for gen, code, detail, request in self._errors:
             if gen == self._gen:
                 return Status.from_mcp_error(code, f"{detail} (to {request})" if detail

@@ -27,9 +27,11 @@ class ExecutiveSettings:
     partial_margin_m: float = 0.10  # more for one seen only in part (in a rock's shadow)
     max_replans: int = 4  # re-plans inside one crossing (off the path after a fix)
     # -- digging and the collector ----------------------------------------------------------
-    dig_target_kg: float = 16.0  # ASSUMPTION: a load that pays for the trip (about 55 s at
-    #   the simulator's 0.3 kg/s) and leaves time for a second cycle
-    dig_max_s: float = 90.0  # give up digging a spot after this long
+    dig_target_kg: float = 36.0  # ASSUMPTION: a full bin, less a margin (the simulator's
+    #   holds 40 kg); the run's time left shortens the dig (statemachine.productivity)
+    dig_rate_kg_s: float = 0.3  # ASSUMPTION: the simulator's rate at full chain speed, until
+    #   a dig has measured it
+    dig_max_s: float = 150.0  # give up digging a spot after this long (a full bin: ~120 s)
     chain_speed_pct: float = 100.0
     creep_speed_pct: float = 3.0  # forward while digging (about 9 mm/s)
     dock_speed_pct: float = 12.0  # the last centimetres backwards onto the buttons

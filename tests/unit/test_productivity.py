@@ -1,0 +1,58 @@
+"""The dig length that makes a run deliver the most (SPEC 6.3 Productivity)."""
+
+from __future__ import annotations
+
+import pytest
+
+from ramp.statemachine import Estimates
+from ramp.statemachine.productivity import plan_dig
+
+# A cycle's overhead of 2 x 50 + 30 = 130 s; the return 80 s; a full bin 120 s of digging.
+EST = Estimates(trip_s=50.0, dock_deposit_s=30.0, min_dig_s=30.0, home_s=50.0)
+FULL_S = 120.0
+
+
+def test_with_time_for_one_full_bin_and_a_second_it_digs_the_bin_full_first() -> None:
+    # 500 s left: 500 - 30 - 80 = 390 s; two cycles dig 390 - 130 = 260 s -> 2 x 120 (full).
+    plan = plan_dig(500.0, 30.0, EST, FULL_S)
+    assert plan.cycles == 2
+    assert plan.dig_s == pytest.approx(FULL_S)
+
+
+def test_two_cycles_that_cannot_both_fill_the_bin_fill_the_first() -> None:
+    # 400 s left: 290 s to dig; two cycles dig 160 s (one cycle: only 120 s). The first
+    # takes a full bin and leaves the second its 40 s: if the second no longer fits (a slow
+    # way home), the run has the bigger load already.
+    plan = plan_dig(400.0, 30.0, EST, FULL_S)
+    assert plan.cycles == 2
+    assert plan.dig_s == pytest.approx(FULL_S)
+    # 370 s left: two cycles dig 130 s (one: 120 s); the first 100 s, the second its 30 s
+    plan = plan_dig(370.0, 30.0, EST, FULL_S)
+    assert plan.cycles == 2
+    assert plan.dig_s == pytest.approx(100.0)
+
+
+def test_near_the_end_the_last_dig_is_shorter_so_the_deposit_lands_before_the_end() -> None:
+    # 170 s left: the return (80 s) and the margin (30 s) leave 60 s of digging, not 120.
+    plan = plan_dig(170.0, 30.0, EST, FULL_S)
+    assert plan.cycles == 1
+    assert plan.dig_s == pytest.approx(60.0)
+
+
+def test_with_no_time_to_dig_it_plans_no_dig() -> None:
+    assert plan_dig(100.0, 30.0, EST, FULL_S).dig_s == 0.0
+
+
+def test_a_second_cycle_whose_dig_would_be_shorter_than_the_shortest_is_not_planned() -> None:
+    # 290 s left: 180 s to dig; two cycles would dig 25 s each (< 30 s): one dig of 120 s.
+    plan = plan_dig(290.0, 30.0, EST, FULL_S)
+    assert plan.cycles == 1
+    assert plan.dig_s == pytest.approx(FULL_S)
+
+
+def test_a_cycle_counts_the_way_out_and_the_way_home_each_once() -> None:
+    # Randomized seed 1: out 64 s, home 119 s, dock and deposit 35 s. Twice the longer leg
+    # made a cycle 303 s and ended the run at 320 s with 279 s left; it takes 248 s.
+    est = Estimates(trip_s=64.0, dock_deposit_s=35.0, min_dig_s=30.0, home_s=119.0)
+    assert est.cycle_s() == pytest.approx(64.0 + 119.0 + 30.0 + 35.0)
+    assert est.return_s() == pytest.approx(119.0 + 35.0)
