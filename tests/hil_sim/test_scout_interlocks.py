@@ -9,24 +9,11 @@ from collections.abc import Iterator
 
 import pytest
 
-from tests.harness import SCOUT_YAML, SimHarness, config_from
+from tests.harness import SCOUT_YAML, SimHarness
 
-#: scout.yaml's rules, as they stand in the file (commented out until the interlocks engine is
-#: on this branch: then the file's own text is used).
-RULES_ACTIVE = "\ninterlocks:" in SCOUT_YAML
-YAML = SCOUT_YAML if RULES_ACTIVE else re.sub(r"(?m)^# (interlocks:|  )", r"\1", SCOUT_YAML)
-
-
-def _engine_present() -> bool:
-    try:
-        config_from(YAML)
-    except Exception:  # noqa: BLE001 - the config loader does not know `interlocks:` yet
-        return False
-    return True
-
-
-pytestmark = pytest.mark.skipif(not _engine_present(),
-                                reason="the interlocks engine (SPEC 11) is not merged yet")
+#: scout.yaml as it ships, rules included.
+YAML = SCOUT_YAML
+assert "\ninterlocks:" in YAML, "examples/robots/scout.yaml ships its interlocks"
 
 
 @pytest.fixture

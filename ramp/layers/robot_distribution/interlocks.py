@@ -165,6 +165,8 @@ class Rule:
         self.predicate = predicate
         self.active = False
         self.latched = False
+        #: The condition was seen true (not only unreadable) since the rule last became active.
+        self.seen_true = False
         self.why = ""
         #: Clock time since which the condition has been clear (None while it holds).
         self.clear_since: float | None = None
@@ -317,14 +319,19 @@ class Interlocks:
         unreadable = self.props[verdict][0] if verdict >= 0 else ""
         if holds:
             rule.clear_since = None
-            if rule.spec.latch and not unreadable:
-                rule.latched = True
+            if not unreadable:
+                rule.seen_true = True
+                if rule.spec.latch:
+                    rule.latched = True
         elif rule.clear_since is None:
             rule.clear_since = now
         # Released only once clear for RELEASE_AFTER_S: a reading hovering at the threshold
-        # (a lift held at 0.5 against `> 0.5`) keeps the rule active instead of flapping.
+        # (a lift held at 0.5 against `> 0.5`) keeps the rule active instead of flapping. A
+        # rule held only because a property could not be read (a module still attaching at
+        # boot) is released as soon as the reading is there and clear.
         active = holds or rule.latched or (
-            rule.active and now - rule.clear_since < RELEASE_AFTER_S)  # type: ignore[operator]
+            rule.active and rule.seen_true
+            and now - rule.clear_since < RELEASE_AFTER_S)  # type: ignore[operator]
         was = rule.active
         rule.active = active
         if active:  # what a refusal says: why it is active now
@@ -334,6 +341,7 @@ class Interlocks:
             return False
         if not active:
             rule.why = ""
+            rule.seen_true = False
             log.info("interlock %s released", rule.name)
             self._tell(rule, False, "released", now)
             return False
