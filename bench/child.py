@@ -1,9 +1,11 @@
 """Processes the benchmarks start: `python -m bench.child NAME ...`.
 
 - `supervisor`: exactly `ramp run --sim` (it calls `ramp.cli.main`; `--real` leaves out
-  `--sim`, `--record DIR` records) with an observer (`ramp.runtime.Observer`) that keeps every
-  tick's lateness with its time and, at shutdown, each driver's `stats` and each task's cost;
-  all of it is written to `--dump` as JSON when the process exits (after SIGTERM).
+  `--sim`, `--record DIR` records, `--fake-phidget22` puts the tests' fake of the vendor
+  library in place of `Phidget22`, live: `tests/fake_phidget22.serve`) with an observer
+  (`ramp.runtime.Observer`) that keeps every tick's lateness with its time and, at shutdown,
+  each driver's `stats` and each task's cost; all of it is written to `--dump` as JSON when
+  the process exits (after SIGTERM).
   `--slow-disk BPS` gives the recorder a disk whose writes take BPS bytes a second
   (`bench.recorder.SlowFile`) and a queue of `--queue-records` records.
 - `select-loop`: the tick baseline, a bare absolute-deadline loop waiting in `select.select`,
@@ -71,12 +73,27 @@ def supervisor(args: argparse.Namespace) -> int:
         argv.append("--sim")
     if args.record:
         argv += ["--record", args.record]
+    if args.fake_phidget22:
+        _fake_phidget22()
     if args.slow_disk:
         _slow_disk(args.slow_disk, args.queue_records)
     code = ramp.cli.main(argv, observer=BenchObserver())
     Path(args.dump).write_text(json.dumps({"exit": code, "samples": samples, "busy": busy,
                                            **at_exit}))
     return code
+
+
+#: The fake Phidget22 library's steady readings: a 20.5 V rail through a 1135 sensor on
+#: channel 0, a lift pot at mid stroke on the others, an empty bin's bridge ratio (V/V).
+FAKE_VOLTS = {0: 2.5 + 0.0681 * 20.5}
+FAKE_DEFAULT_VOLTS = 2.5
+FAKE_RATIO = 0.25e-3
+
+
+def _fake_phidget22() -> None:
+    from tests.fake_phidget22 import serve
+
+    serve(FAKE_VOLTS, FAKE_DEFAULT_VOLTS, FAKE_RATIO)
 
 
 def _slow_disk(bytes_per_s: float, queue_records: int) -> None:
@@ -312,6 +329,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--log-level", default="warning")
     p.add_argument("--real", action="store_true", help="real drivers: no --sim")
     p.add_argument("--record", default="", help="ramp run --record DIR")
+    p.add_argument("--fake-phidget22", action="store_true",
+                   help="the tests' fake Phidget22 library, live (tests/fake_phidget22.py)")
     p.add_argument("--slow-disk", type=float, default=0.0,
                    help="the recorder's disk takes this many bytes a second")
     p.add_argument("--queue-records", type=int, default=20_000,

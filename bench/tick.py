@@ -5,7 +5,8 @@ The MARTE configuration runs as a real `ramp run --sim` process on the wall cloc
 `robot.get` only has p50/p99/max over a window), idle and while MCP clients poll it; and
 idle as `ramp run` on real drivers: the Sabertooth driver on ptys served by emulator
 processes, the Phidget driver on a stand-in of the vendor library
-(`bench/fake_phidget22`, whose own thread delivers samples as libphidget22's does).
+(the tests' fake of it, `tests/fake_phidget22.serve`, whose own thread delivers samples as
+libphidget22's does).
 Lateness is wake time minus the absolute deadline, as in
 shared/reference/platform-limits.md. The baseline is a bare absolute-deadline loop waiting in
 `select.select` with a microsecond timeout, doing nothing, at the same rate for the same time
@@ -25,7 +26,6 @@ from typing import Any
 
 from bench.common import (
     PYTHON,
-    REPO,
     Child,
     Settings,
     compare,
@@ -130,12 +130,12 @@ def tick_cost(data: dict[str, Any]) -> dict[str, Any]:
 
 def supervised(config: Path, workdir: Path, duration: float, rate: float,
                settings: Settings | None, real: bool = False,
-               env: dict[str, str] | None = None) -> dict[str, Any]:
+               extra: tuple[str, ...] = ()) -> dict[str, Any]:
     """One run of the supervisor (idle when `settings` is None, else under the poll load),
     with the baseline loop measured over the same window."""
     base = BaselineLoop(rate, workdir)
     try:
-        child, port, dump = start_supervisor("tick", config, workdir, real=real, env=env)
+        child, port, dump = start_supervisor("tick", config, workdir, real=real, extra=extra)
         try:
             t0 = time.monotonic()
             cpu0, bcpu0 = child.cpu_seconds(), base.child.cpu_seconds()
@@ -199,9 +199,8 @@ def real_drivers(workdir: Path, duration: float, rate: float) -> dict[str, Any]:
             emulators.append(emu)
             ports[bus] = emu.expect(r"sabertooth emulator on (\S+)", 30).group(1)
         config = write_config(workdir, "tick-real", ports=ports)
-        fake = str(REPO / "bench" / "fake_phidget22")
         return supervised(config, workdir, duration, rate, None, real=True,
-                          env={"PYTHONPATH": fake})
+                          extra=("--fake-phidget22",))
     finally:
         for emu in emulators:
             emu.kill()

@@ -1,4 +1,4 @@
-"""The `phidget` driver against fakes of the Phidget22 channel classes.
+"""The `phidget` driver against fakes of the Phidget22 channel classes (tests/fake_phidget22.py).
 
 The fakes keep Phidget22's method names and call the registered handlers the way
 libphidget22 does: from threads that are not the scheduler's. Phidget22 itself is not
@@ -12,7 +12,6 @@ import logging
 import math
 import sys
 import threading
-from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -20,279 +19,19 @@ import pytest
 from ramp.errors import ConfigError, DeviceError
 from ramp.hal import driver_class
 from ramp.hal.phidget import PhidgetApi, PhidgetBus
-
-# -- fakes ------------------------------------------------------------------------------------
-EPHIDGET_UNKNOWNVAL = 51
-EPHIDGET_NOTATTACHED = 52
-EEPHIDGET_SATURATION = 0x1009
-
-
-class FakePhidgetException(Exception):
-    def __init__(self, code: int, description: str = "") -> None:
-        super().__init__(f"{code}: {description}")
-        self.code = code
-        self.description = description
-        self.details = description
-
-
-class FakeBridgeGain:
-    # Phidget22's enum values (BridgeGain.py), deliberately not equal to the gains.
-    BRIDGE_GAIN_1 = 1
-    BRIDGE_GAIN_8 = 4
-    BRIDGE_GAIN_16 = 5
-    BRIDGE_GAIN_32 = 6
-    BRIDGE_GAIN_64 = 7
-    BRIDGE_GAIN_128 = 8
-
-
-class FakeVoltageSensorType:
-    SENSOR_TYPE_VOLTAGE = 0
-    SENSOR_TYPE_1135 = 11350
-
-
-class FakeChannel:
-    """Phidget22 channel base: matching, handlers, open/close, attach bookkeeping."""
-
-    min_interval = 1
-    max_interval = 60000
-
-    def __init__(self, board: FakeBoard) -> None:
-        self.board = board
-        board.created.append(self)
-        self.calls: list[str] = []
-        self.handlers: dict[str, Callable[..., None]] = {}
-        self.serial: int | None = None
-        self.hub_port: int | None = None
-        self.channel: int | None = None
-        self.label: str | None = None
-        self.is_open = False
-        self.attached = False
-        self.close_count = 0
-        self.close_raises = False
-        self.open_raises = type(self) in board.fail_open
-        self.data_interval: int | None = None
-        self.handler_threads: set[int] = set()
-
-    # matching
-    def setDeviceSerialNumber(self, n: int) -> None:
-        self.calls.append("setDeviceSerialNumber")
-        self.serial = n
-
-    def setHubPort(self, n: int) -> None:
-        self.calls.append("setHubPort")
-        self.hub_port = n
-
-    def setChannel(self, n: int) -> None:
-        self.calls.append("setChannel")
-        self.channel = n
-
-    def setDeviceLabel(self, s: str) -> None:
-        self.calls.append("setDeviceLabel")
-        self.label = s
-
-    # handlers
-    def setOnAttachHandler(self, h: Callable[..., None]) -> None:
-        self.calls.append("setOnAttachHandler")
-        self.handlers["attach"] = h
-
-    def setOnDetachHandler(self, h: Callable[..., None]) -> None:
-        self.calls.append("setOnDetachHandler")
-        self.handlers["detach"] = h
-
-    def setOnErrorHandler(self, h: Callable[..., None]) -> None:
-        self.calls.append("setOnErrorHandler")
-        self.handlers["error"] = h
-
-    # lifecycle
-    def open(self) -> None:
-        self.calls.append("open")
-        if self.open_raises:
-            raise FakePhidgetException(13, "invalid argument")
-        self.is_open = True
-
-    def openWaitForAttachment(self, ms: int) -> None:
-        raise AssertionError("openWaitForAttachment blocks the tick")
-
-    def close(self) -> None:
-        self.calls.append("close")
-        self.close_count += 1
-        self.is_open = False
-        self.attached = False
-        if self.close_raises:
-            raise FakePhidgetException(EPHIDGET_NOTATTACHED, "not attached")
-
-    def getAttached(self) -> bool:
-        return self.attached
-
-    def _need_attached(self) -> None:
-        if not self.attached:
-            raise FakePhidgetException(EPHIDGET_NOTATTACHED, "not attached")
-
-    def getMinDataInterval(self) -> int:
-        self._need_attached()
-        return self.min_interval
-
-    def getMaxDataInterval(self) -> int:
-        self._need_attached()
-        return self.max_interval
-
-    def setDataInterval(self, ms: int) -> None:
-        self._need_attached()
-        assert isinstance(ms, int)
-        assert self.min_interval <= ms <= self.max_interval
-        self.data_interval = ms
-
-    # the library's side: call a handler as libphidget22 would (on its own thread)
-    def fire(self, name: str, *args: Any) -> None:
-        self.handler_threads.add(threading.get_ident())
-        self.handlers[name](self, *args)
-
-    def plug(self) -> None:
-        assert self.is_open, "the library attaches only open channels"
-        self.attached = True
-        self.fire("attach")
-
-    def unplug(self) -> None:
-        self.attached = False
-        self.fire("detach")
-
-
-class FakeVoltageInput(FakeChannel):
-    def __init__(self, board: FakeBoard) -> None:
-        super().__init__(board)
-        self.trigger: float | None = None
-        self.sensor_type: int | None = None
-
-    def setOnVoltageChangeHandler(self, h: Callable[..., None]) -> None:
-        self.calls.append("setOnVoltageChangeHandler")
-        self.handlers["sample"] = h
-
-    def setVoltageChangeTrigger(self, t: float) -> None:
-        self._need_attached()
-        self.trigger = t
-
-    def setSensorType(self, t: int) -> None:
-        self._need_attached()
-        self.sensor_type = t
-
-    def getVoltage(self) -> float:
-        raise AssertionError("getVoltage is not used: samples come from events")
-
-
-class FakeVoltageRatioInput(FakeChannel):
-    min_interval = 8
-
-    def __init__(self, board: FakeBoard) -> None:
-        super().__init__(board)
-        self.trigger: float | None = None
-        self.bridge_enabled = False
-        self.gain: int | None = None
-
-    def setOnVoltageRatioChangeHandler(self, h: Callable[..., None]) -> None:
-        self.calls.append("setOnVoltageRatioChangeHandler")
-        self.handlers["sample"] = h
-
-    def setVoltageRatioChangeTrigger(self, t: float) -> None:
-        self._need_attached()
-        self.trigger = t
-
-    def setBridgeEnabled(self, on: bool) -> None:
-        self._need_attached()
-        self.bridge_enabled = on
-
-    def setBridgeGain(self, g: int) -> None:
-        self._need_attached()
-        self.gain = g
-
-
-class FakeDigitalInput(FakeChannel):
-    def __init__(self, board: FakeBoard) -> None:
-        super().__init__(board)
-        self.state: bool | None = None  # None: the library has no value yet
-
-    def setOnStateChangeHandler(self, h: Callable[..., None]) -> None:
-        self.calls.append("setOnStateChangeHandler")
-        self.handlers["sample"] = h
-
-    def getState(self) -> bool:
-        self._need_attached()
-        if self.state is None:
-            raise FakePhidgetException(EPHIDGET_UNKNOWNVAL, "unknown value")
-        return self.state
-
-
-class FakeDigitalOutput(FakeChannel):
-    def __init__(self, board: FakeBoard) -> None:
-        super().__init__(board)
-        self.writes: list[bool] = []
-
-    def setState(self, on: bool) -> None:
-        self._need_attached()
-        self.writes.append(on)
-
-
-class FakeAsyncDigitalOutput(FakeDigitalOutput):
-    """Like the real class: setState_async returns at once, the result comes on a thread."""
-
-    def __init__(self, board: FakeBoard) -> None:
-        super().__init__(board)
-        self.pending: list[tuple[bool, Callable[..., None]]] = []
-
-    def setState(self, on: bool) -> None:
-        raise AssertionError("the blocking setState is not used when setState_async exists")
-
-    def setState_async(self, on: bool, handler: Callable[..., None]) -> None:
-        self.pending.append((on, handler))
-
-    def complete(self, code: int = 0) -> None:
-        on, handler = self.pending.pop(0)
-        if code == 0:
-            self.writes.append(on)
-        handler(self, code, "" if code == 0 else "failed")
-
-
-class FakeBoard:
-    """Builds the fake api and remembers every channel object created through it."""
-
-    def __init__(self, dout: type[FakeDigitalOutput] = FakeDigitalOutput) -> None:
-        self.created: list[FakeChannel] = []
-        self.fail_open: set[type] = set()  # open() of these classes raises
-        self.api = PhidgetApi(
-            VoltageInput=lambda: FakeVoltageInput(self),
-            VoltageRatioInput=lambda: FakeVoltageRatioInput(self),
-            DigitalInput=lambda: FakeDigitalInput(self),
-            DigitalOutput=lambda: dout(self),
-            PhidgetException=FakePhidgetException,
-            BridgeGain=FakeBridgeGain,
-            VoltageSensorType=FakeVoltageSensorType,
-        )
-
-    def handle(self, cls: type[FakeChannel], channel: int) -> Any:
-        """The newest channel object of this class and index."""
-        found = [c for c in self.created if isinstance(c, cls) and c.channel == channel]
-        assert found, f"no {cls.__name__} {channel} created"
-        return found[-1]
-
-    def open_handles(self) -> list[FakeChannel]:
-        return [c for c in self.created if c.is_open]
-
-
-def on_library_thread(fn: Callable[[], None]) -> None:
-    """Run `fn` on another thread, as libphidget22 runs its callbacks."""
-    errors: list[BaseException] = []
-
-    def run() -> None:
-        try:
-            fn()
-        except BaseException as exc:  # noqa: BLE001 - re-raised on the test thread
-            errors.append(exc)
-
-    t = threading.Thread(target=run)
-    t.start()
-    t.join(5.0)
-    assert not t.is_alive()
-    if errors:
-        raise errors[0]
+from tests.fake_phidget22 import (
+    EEPHIDGET_SATURATION,
+    EPHIDGET_NOTATTACHED,
+    FakeAsyncDigitalOutput,
+    FakeBoard,
+    FakeBridgeGain,
+    FakeDigitalInput,
+    FakeDigitalOutput,
+    FakePhidgetException,
+    FakeVoltageInput,
+    FakeVoltageRatioInput,
+    on_library_thread,
+)
 
 
 class Kit:
@@ -308,8 +47,8 @@ class Kit:
 
     def handles(self) -> tuple[Any, Any, Any, Any]:
         b = self.board
-        return (b.handle(FakeVoltageInput, 3), b.handle(FakeVoltageRatioInput, 0),
-                b.handle(FakeDigitalInput, 1), b.handle(FakeDigitalOutput, 2))
+        return (b.of(FakeVoltageInput, 3), b.of(FakeVoltageRatioInput, 0),
+                b.of(FakeDigitalInput, 1), b.of(FakeDigitalOutput, 2))
 
     def plug_all(self, button: bool = False) -> None:
         ai, br, di, do = self.handles()
@@ -366,7 +105,7 @@ def test_one_output_one_driver_but_inputs_are_shared() -> None:
         bus.channel("digital_out", "ble.led", {"channel": 0})
     bus.open(0.0)
     assert len([c for c in board.created if isinstance(c, FakeVoltageInput)]) == 1
-    ai = board.handle(FakeVoltageInput, 0)
+    ai = board.of(FakeVoltageInput, 0)
     on_library_thread(lambda: (ai.plug(), ai.fire("sample", 4.25)))
     bus.tick(0.01, 0.01)
     assert a.read() == b.read() == 4.25
@@ -453,7 +192,7 @@ def test_failed_open_closes_what_it_opened() -> None:
         kit.bus.open(0.0)
     assert not kit.bus.is_open
     assert kit.board.open_handles() == []
-    assert kit.board.handle(FakeVoltageInput, 3).close_count == 1
+    assert kit.board.of(FakeVoltageInput, 3).close_count == 1
 
 
 # -- events ------------------------------------------------------------------------------------
@@ -531,7 +270,7 @@ def test_a_digital_input_without_a_value_waits() -> None:
     bus = PhidgetBus("io", {}, api=board.api)
     button = bus.channel("digital_in", "base.r_button", {"channel": 4})
     bus.open(0.0)
-    di = board.handle(FakeDigitalInput, 4)
+    di = board.of(FakeDigitalInput, 4)
     on_library_thread(di.plug)  # attached, but the library has no state yet
     bus.tick(0.01, 0.01)
     assert not bus.ready()
@@ -692,7 +431,7 @@ def test_async_output_writes_retry_after_a_failure() -> None:
     bus = PhidgetBus("io", {}, api=board.api)
     led = bus.channel("digital_out", "base.user_led", {"channel": 0})
     bus.open(0.0)
-    do = board.handle(FakeAsyncDigitalOutput, 0)
+    do = board.of(FakeAsyncDigitalOutput, 0)
     on_library_thread(do.plug)
     led.write(True)
     bus.tick(0.01, 0.01)
