@@ -5,12 +5,16 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak soak-safety clean
+.PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak soak-safety clean docs
 
-$(STAMP): pyproject.toml
+# RAMP, then the example plugins: Scout's arm, and the guides' winch (SPEC 10: installed as a
+# team installs a plugin package; their entry points are what RAMP finds).
+$(STAMP): pyproject.toml examples/ramp-arm/pyproject.toml examples/ramp-winch/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[dev]'
+	$(PY) -m pip install --quiet -e examples/ramp-arm
+	$(PY) -m pip install --quiet -e examples/ramp-winch
 	touch $(STAMP)
 
 run: $(STAMP)
@@ -41,7 +45,7 @@ campaign: $(STAMP)
 	$(VENV)/bin/ramp sim campaign --runs 40
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check ramp firmware_like tests bench
+	$(VENV)/bin/ruff check ramp firmware_like tests bench examples
 	$(VENV)/bin/mypy
 	$(VENV)/bin/lint-imports
 
@@ -62,10 +66,15 @@ soak-safety: $(STAMP)
 	RAMP_SAFETY_EXAMPLES=400 $(PY) -m pytest tests/hil_sim/test_safety_model.py -q
 
 clean:
-	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis .import_linter_cache
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis .import_linter_cache site
+
+# The documentation site (docs/, mkdocs.yml) into site/; open site/index.html. --strict: a
+# broken link, anchor or API page fails it. tests/unit/test_docs.py builds it in `make test`.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
 # Refresh the console's screenshots: the browser tests take them (docs/img/teleop.png,
-# docs/img/console-autonomy.png).
+# docs/img/console-autonomy.png, and docs/img/console-scout.png of Scout).
 screenshots: $(STAMP)
 	RAMP_UPDATE_DOCS=1 $(PY) -m pytest -q tests/hil_sim/test_teleop_browser.py \
-	  tests/hil_sim/test_console_autonomy_browser.py
+	  tests/hil_sim/test_console_autonomy_browser.py tests/hil_sim/test_scout_console.py

@@ -96,6 +96,18 @@ def render(doc: dict[str, Any]) -> str:
                 out.append(f"| {key.split('_')[1]} | {_num(tl['p50'])} µs | {_num(tl['p99'])} µs"
                            f" | {_num(tl['max'])} µs | {v['tick_overruns']} |")
         out.append("")
+    i = doc.get("interlocks")
+    if i and "error" not in i:
+        out += [f"**interlocks** ({i['rules']} rules beside none, `ramp run --sim`; every rule "
+                f"guards `{i['request']}`; median of {i.get('trials', 1)} trials)", "", HEAD,
+                _row("tick cost (all tasks), mean", i["tick_cost_us"], " µs"),
+                _row("request RTT p50", i["request_rtt_p50_us"], " µs"),
+                _row("request RTT mean", i["request_rtt_mean_us"], " µs"), "",
+                f"The rules add {_num(i['tick_cost_added_us'])} µs to a tick (their task: "
+                f"{_num(i['interlocks_task_us']['mean'])} µs mean, "
+                f"{_num(i['interlocks_task_us']['max'])} µs max) and "
+                f"{_num(i['request_rtt_added_p50_us'])} µs to a guarded request's round trip "
+                "(p50).", ""]
     c = doc.get("command_to_wire")
     if c and "error" not in c:
         out += [f"**command_to_wire** ({c['baud']} baud: {c['wire_ms_per_packet']} ms per "

@@ -37,41 +37,38 @@ import bisect
 import math
 import random
 from collections.abc import Iterable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from firmware_like.arena import (
     Layout,
     Pose,
     StartSpec,
     collector_span,
-    disc_overlap,
     footprint_corners,
     random_layout,
     region_of,
     seeded_start,
     start_pose,
 )
+from firmware_like.arena_floor import ArenaFloor
 from firmware_like.arena_params import ArenaParams
+from firmware_like.bucket_ladder import CHAINS, LIFT, BucketLadderExcavator, clipped_gauss
 from firmware_like.marte_params import MarteParams
 from firmware_like.terrain import Terrain
 
 LEFT_WHEELS = ("base.lf_wheel", "base.lb_wheel")
 RIGHT_WHEELS = ("base.rf_wheel", "base.rb_wheel")
 WHEELS = LEFT_WHEELS + RIGHT_WHEELS
-CHAINS = ("ble.chain_left", "ble.chain_right")
-LIFT = "ble.lift_motor"
 MOTORS = WHEELS + CHAINS + (LIFT,)
 ANALOG_INPUTS = ("base.battery", "ble.lift_pot")
 DIGITAL_INPUTS = ("base.l_button", "base.r_button")
 DIGITAL_OUTPUTS = ("base.user_led", "base.led_high", "base.led_mid", "base.led_low")
 BRIDGE_INPUTS = ("ble.load_cell",)
 
-# Sign from a motor's duty to its useful direction (wheel forward, chain digging, lift up).
+# Sign from a wheel motor's duty to rolling forward (the BLE's are in its own part).
 _MOUNT: dict[str, float] = {
     "base.lf_wheel": 1.0, "base.lb_wheel": 1.0,
     "base.rf_wheel": -1.0, "base.rb_wheel": -1.0,
-    "ble.chain_left": 1.0, "ble.chain_right": -1.0,
-    "ble.lift_motor": 1.0,
 }
 
 REGIONS = ("start", "obstacle", "dig")
@@ -144,35 +141,23 @@ class MarteWorld:
         self._rng = random.Random(seed)
         self._ocv_soc = [s for s, _ in p.ocv_curve]
         self._ocv_volts = [v * p.battery_cells for _, v in p.ocv_curve]
-        self._duty: dict[str, float] = dict.fromkeys(MOTORS, 0.0)
-        # Each motor's speed as a fraction of its free speed at `motor_ref_voltage`, in the
-        # motor's own sense (positive duty -> positive speed).
-        self._speed: dict[str, float] = dict.fromkeys(MOTORS, 0.0)
+        self._duty: dict[str, float] = dict.fromkeys(WHEELS, 0.0)
+        # Each wheel motor's speed as a fraction of its free speed at `motor_ref_voltage`, in
+        # the motor's own sense (positive duty -> positive speed).
+        self._speed: dict[str, float] = dict.fromkeys(WHEELS, 0.0)
         self._outputs: dict[str, bool] = dict.fromkeys(DIGITAL_OUTPUTS, False)
         self._unplugged: set[str] = set()
-        self._lift_jammed = False
         self._wheel_scale = dict(zip(WHEELS, p.wheel_speed_scale, strict=True))
-        self._lift_blocked = False
-        self._digging = False
-        self._chain_dig_speed = 0.0
+        #: The Bucket Ladder Excavator, a part of its own that this chassis carries and steps
+        #: (`firmware_like.bucket_ladder`); the `ble` module's signals are its.
+        self.ble = BucketLadderExcavator(self.params)
         self.time = 0.0
         #: Moves on whenever what the read_* methods return may have changed (a step, a
         #: placement), so a reader need not sample again while it stands still.
         self.revision = 0
-        self.layout = layout if layout is not None else Layout(source="empty arena")
-        self.terrain = Terrain(self.layout, self.arena, seed, flat=layout is None)
-        self._flat = layout is None
-        self._rocks = [(r.x, r.y, r.radius) for r in self.layout.rocks]
-        self._craters = [(c.x, c.y, c.radius) for c in self.layout.craters]
-        self._reach = math.hypot(p.robot_length, p.robot_width) / 2.0 + max(
-            [r for *_, r in self._rocks + self._craters] + [0.0])
-        self.collisions = 0
-        self.crater_entries = 0
-        self.collision_log: list[tuple[float, str]] = []
-        self.crater_log: list[tuple[float, str]] = []
-        self.trapped = False
-        self._traction = 1.0
-        self._touching: set[str] = set()
+        #: The floor this chassis stands on, a part of its own: the RMC arena's walls, rocks,
+        #: craters and terrain, and the referee's counts (`firmware_like.arena_floor`).
+        self.floor = ArenaFloor(p, self.arena, seed, layout)
         self.z = self.roll = self.pitch = 0.0
         self._velocity = (0.0, 0.0, 0.0)  # world frame, over the last piece (for the IMU)
         self._imu = ImuTruth(0.0, 0.0, 0.0, 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
@@ -189,11 +174,6 @@ class MarteWorld:
             self.heading = math.remainder(math.radians(pose.yaw_deg), 2.0 * math.pi)
         self.start_pose = Pose(self.x, self.y, self.heading_deg)
         self._settle()
-        self.lift_pos = 0.0
-        self.bin_kg = 0.0
-        self.delivered_kg = 0.0
-        self.spilled_kg = 0.0
-        self.excavated_kg = 0.0
         self.battery_soc = p.initial_soc
         self.battery_current = p.idle_current
         self.battery_voltage = self._ocv(self.battery_soc) - self.battery_current * (
@@ -220,22 +200,21 @@ class MarteWorld:
         duty = float(duty)
         if not math.isfinite(duty):
             raise ValueError(f"duty for {name} must be finite, got {duty!r}")
-        self._duty[name] = max(-1.0, min(1.0, duty))
+        duties = self.ble.duty if self.ble.owns_motor(name) else self._duty
+        duties[name] = max(-1.0, min(1.0, duty))
 
     def duty(self, name: str) -> float:
         """The duty last commanded to a motor (what the controller is applying now)."""
         _known(name, "motor", MOTORS)
-        return self._duty[name]
+        return self.ble.duty[name] if self.ble.owns_motor(name) else self._duty[name]
 
     def read_analog(self, name: str) -> float:
         """Volts at the ADC pin, as sampled at the last step."""
         _known(name, "analog input", ANALOG_INPUTS)
         p = self.params
-        if name == "base.battery":
-            volts = p.v_sensor_offset + p.v_sensor_gain * self.battery_voltage
-        else:
-            span = p.pot_extended_volts - p.pot_retracted_volts
-            volts = p.pot_retracted_volts + span * self.lift_pos
+        if name != "base.battery":
+            return self.ble.read_pot()
+        volts = p.v_sensor_offset + p.v_sensor_gain * self.battery_voltage
         return volts + self._noise[name]
 
     def read_digital(self, name: str) -> bool:
@@ -258,8 +237,7 @@ class MarteWorld:
     def read_bridge(self, name: str) -> float:
         """Load cell ratio in mV/V: an offset for the empty bin plus the regolith's weight."""
         _known(name, "bridge input", BRIDGE_INPUTS)
-        p = self.params
-        return p.load_cell_offset + p.load_cell_gain * self.bin_kg + self._noise[name]
+        return self.ble.read_load_cell()
 
     def bus_present(self, bus: str) -> bool:
         """False between `unplug(bus)` and `replug(bus)`; any bus name is accepted."""
@@ -286,15 +264,12 @@ class MarteWorld:
             return quantity != 0
         if name == "base.battery":
             return p.v_sensor_offset + p.v_sensor_gain * quantity
-        if name == "ble.lift_pot":
-            return p.pot_retracted_volts + (p.pot_extended_volts - p.pot_retracted_volts) * (
-                quantity)
-        _known(name, "input", BRIDGE_INPUTS)
-        return p.load_cell_offset + p.load_cell_gain * quantity
+        _known(name, "input", ANALOG_INPUTS + BRIDGE_INPUTS)
+        return self.ble.sensor_reading(name, quantity)
 
     def jam_lift(self, jammed: bool) -> None:
         """Stall the lift actuator in place (it draws stall current and does not move)."""
-        self._lift_jammed = bool(jammed)
+        self.ble.lift_jammed = bool(jammed)
 
     def place(self, x: float, y: float, heading_deg: float) -> None:
         """Set the pose (heading counter-clockwise from +x); the footprint must lie inside
@@ -371,12 +346,82 @@ class MarteWorld:
 
     @property
     def lift_jammed(self) -> bool:
-        return self._lift_jammed
+        return self.ble.lift_jammed
 
     @property
     def digging(self) -> bool:
         """True while the last step moved regolith into the bin."""
-        return self._digging
+        return self.ble.digging
+
+    # The arena's state and the referee's counts, through the robot as before.
+    @property
+    def layout(self) -> Layout:
+        return self.floor.layout
+
+    @property
+    def terrain(self) -> Terrain:
+        return self.floor.terrain
+
+    @property
+    def collisions(self) -> int:
+        return self.floor.collisions
+
+    @property
+    def crater_entries(self) -> int:
+        return self.floor.crater_entries
+
+    @property
+    def collision_log(self) -> list[tuple[float, str]]:
+        return self.floor.collision_log
+
+    @property
+    def crater_log(self) -> list[tuple[float, str]]:
+        return self.floor.crater_log
+
+    @property
+    def trapped(self) -> bool:
+        return self.floor.trapped
+
+    # The BLE's state, through the robot as before (the referee, traces; tests set it).
+    @property
+    def lift_pos(self) -> float:
+        return self.ble.lift_pos
+
+    @lift_pos.setter
+    def lift_pos(self, value: float) -> None:
+        self.ble.lift_pos = value
+
+    @property
+    def bin_kg(self) -> float:
+        return self.ble.bin_kg
+
+    @bin_kg.setter
+    def bin_kg(self, value: float) -> None:
+        self.ble.bin_kg = value
+
+    @property
+    def delivered_kg(self) -> float:
+        return self.ble.delivered_kg
+
+    @delivered_kg.setter
+    def delivered_kg(self, value: float) -> None:
+        self.ble.delivered_kg = value
+
+    @property
+    def spilled_kg(self) -> float:
+        return self.ble.spilled_kg
+
+    @spilled_kg.setter
+    def spilled_kg(self, value: float) -> None:
+        self.ble.spilled_kg = value
+
+    @property
+    def excavated_kg(self) -> float:
+        return self.ble.excavated_kg
+
+    @excavated_kg.setter
+    def excavated_kg(self, value: float) -> None:
+        self.ble.excavated_kg = value
 
     def wheel_speed(self, name: str) -> float:
         """Ground speed of one wheel in m/s, positive rolling the robot forward."""
@@ -386,7 +431,7 @@ class MarteWorld:
     def motor_speed(self, name: str) -> float:
         """Motor speed as a fraction of free speed at the reference voltage, in duty sense."""
         _known(name, "motor", MOTORS)
-        return self._speed[name]
+        return self.ble.speed[name] if self.ble.owns_motor(name) else self._speed[name]
 
     def region(self) -> str:
         """Arena region of the robot's centre: "start", "obstacle" or "dig"."""
@@ -419,7 +464,7 @@ class MarteWorld:
             "delivered_kg": self.delivered_kg, "spilled_kg": self.spilled_kg,
             "excavated_kg": self.excavated_kg, "battery_voltage": self.battery_voltage,
             "battery_current": self.battery_current, "battery_soc": self.battery_soc,
-            "digging": self._digging, "lift_jammed": self._lift_jammed,
+            "digging": self.ble.digging, "lift_jammed": self.ble.lift_jammed,
             "z": self.z, "roll_deg": math.degrees(self.roll),
             "pitch_deg": math.degrees(self.pitch), "collisions": self.collisions,
             "crater_entries": self.crater_entries, "trapped": self.trapped,
@@ -447,12 +492,13 @@ class MarteWorld:
         # voltage is the previous piece's, which keeps the battery-motor loop explicit.
         volt_factor = max(0.0, self.battery_voltage) / p.motor_ref_voltage
         alpha = 1.0 - math.exp(-dt / p.motor_time_constant)
-        for name in MOTORS:
+        for name in WHEELS:
             target = self._duty[name] * volt_factor
             self._speed[name] += (target - self._speed[name]) * alpha
+        self.ble.follow_duty(volt_factor, alpha)
         self._move_chassis(dt)
-        self._move_lift(dt)
-        self._dig_and_dump(dt)
+        self.ble.move_lift(dt)
+        self.ble.dig_and_dump(dt, self.front_x(), self.at_collector)
         self._drain_battery(dt)
         self.time += dt
 
@@ -462,8 +508,8 @@ class MarteWorld:
                                            self.pitch)
         left = sum(self._wheel_ground_speed(n) for n in LEFT_WHEELS) / len(LEFT_WHEELS)
         right = sum(self._wheel_ground_speed(n) for n in RIGHT_WHEELS) / len(RIGHT_WHEELS)
-        left *= self._traction * p.traction
-        right *= self._traction * p.traction
+        left *= self.floor.traction * p.traction
+        right *= self.floor.traction * p.traction
         v = 0.5 * (left + right)
         # Counter-clockwise positive: the right side running faster turns the robot left.
         yaw_rate = p.skid_efficiency * (right - left) / p.track_width
@@ -472,29 +518,16 @@ class MarteWorld:
         self.y += v * math.sin(mid) * dt
         self.heading = math.remainder(self.heading + yaw_rate * dt, 2.0 * math.pi)
         self._clamp_to_arena()
-        if self._rocks:
+        if self.floor.rocks:
             self._push_off_rocks()
         self._update_contacts(count=True)
         self._update_attitude()
         self._update_imu(dt, x0, y0, z0, yaw0, roll0, pitch0)
 
+    # The arena's part (firmware_like/arena_floor.py): walls, rocks, craters and terrain act on
+    # this chassis; these keep the chassis' own names for them.
     def _push_off_rocks(self) -> None:
-        """A rock stops the robot: a footprint deeper into a rock's disc than a wheel can ride
-        up its flank is pushed back out, keeping its heading (it slides along the rock)."""
-        p, ride = self.params, self.arena.rock_ride_up
-        moved = False
-        for cx, cy, r in self._rocks:
-            if (cx - self.x) ** 2 + (cy - self.y) ** 2 >= self._reach ** 2:
-                continue
-            depth, nx, ny = disc_overlap(self.x, self.y, self.heading, p.robot_length,
-                                         p.robot_width, cx, cy, r)
-            limit = min(ride, r)
-            if depth > limit:
-                self.x += nx * (depth - limit)
-                self.y += ny * (depth - limit)
-                moved = True
-        if moved:
-            self._clamp_to_arena()
+        self.floor.push_off_rocks(self)
 
     def contacts(self) -> list[str]:
         """What the footprint touches now (walls, rocks, craters), as the referee names
@@ -503,76 +536,13 @@ class MarteWorld:
         return sorted(hits | craters)
 
     def _contacts(self) -> tuple[set[str], set[str]]:
-        """(what the footprint collides with, craters it overlaps) now, by SPEC 6.1."""
-        p, a = self.params, self.arena
-        eps = a.contact_epsilon
-        corners = self._corners()
-        hits: set[str] = set()
-        at_x0 = [i for i, c in enumerate(corners) if c[0] <= eps]
-        if at_x0:
-            lo, hi = collector_span(p)
-            docking = (all(i >= 2 for i in at_x0)  # only rear corners touch
-                       and min(c[0] for c in corners) >= -a.docking_tolerance
-                       and all(lo <= corners[i][1] <= hi for i in at_x0))
-            if not docking:
-                hits.add("wall x=0")
-        if any(c[0] >= p.arena_length - eps for c in corners):
-            hits.add(f"wall x={p.arena_length:g}")
-        if any(c[1] <= eps for c in corners):
-            hits.add("wall y=0")
-        if any(c[1] >= p.arena_width - eps for c in corners):
-            hits.add(f"wall y={p.arena_width:g}")
-        craters: set[str] = set()
-        for kind, discs, out in (("rock", self._rocks, hits), ("crater", self._craters,
-                                                                craters)):
-            for i, (cx, cy, r) in enumerate(discs):
-                if (cx - self.x) ** 2 + (cy - self.y) ** 2 >= self._reach ** 2:
-                    continue
-                depth, _, _ = disc_overlap(self.x, self.y, self.heading, p.robot_length,
-                                           p.robot_width, cx, cy, r)
-                if depth > 0.0:
-                    out.add(f"{kind} {i}")
-        return hits, craters
+        return self.floor.contacts(self)
 
     def _update_contacts(self, count: bool) -> None:
-        """Count each collision and crater entry once, when it begins."""
-        hits, craters = self._contacts()
-        now = hits | craters
-        if count:
-            for what in sorted(hits - self._touching):
-                self.collisions += 1
-                self.collision_log.append((self.time, what))
-            for what in sorted(craters - self._touching):
-                self.crater_entries += 1
-                self.crater_log.append((self.time, what))
-        self._touching = now
+        self.floor.update_contacts(self, count)
 
     def _update_attitude(self) -> None:
-        """Rest the chassis on its four wheels: height, pitch and roll from where each wheel
-        touches the terrain; the deepest wheel in a crater sets the traction."""
-        if self._flat:
-            return
-        p, a = self.params, self.arena
-        c, s = math.cos(self.heading), math.sin(self.heading)
-        hb, ht = p.wheelbase / 2.0, p.track_width / 2.0
-        radius, half_w = p.wheel_diameter / 2.0, p.wheel_width / 2.0
-        z: list[float] = []
-        sink = 0.0
-        for f, lft in ((hb, ht), (hb, -ht), (-hb, ht), (-hb, -ht)):
-            wx, wy = self.x + f * c - lft * s, self.y + f * s + lft * c
-            h, ground = self.terrain.wheel_contact(wx, wy, c, s, radius, half_w)
-            z.append(h)
-            sink = max(sink, ground - h)
-        fl, fr, rl, rr = z
-        self.z = (fl + fr + rl + rr) / 4.0
-        self.pitch = math.asin(max(-1.0, min(1.0, ((rl + rr) - (fl + fr)) / (2.0 * p.wheelbase))))
-        across = 2.0 * p.track_width * math.cos(self.pitch)
-        self.roll = math.asin(max(-1.0, min(1.0, ((fl + rl) - (fr + rr)) / across)))
-        self.trapped = sink >= a.crater_trap_sink
-        if self.trapped:
-            self._traction = 0.0
-        else:
-            self._traction = 1.0 - (1.0 - a.crater_slow_min) * max(0.0, sink) / a.crater_trap_sink
+        self.floor.rest(self)
 
     def _update_imu(self, dt: float, x0: float, y0: float, z0: float, yaw0: float,
                     roll0: float, pitch0: float) -> None:
@@ -605,71 +575,14 @@ class MarteWorld:
                              (0.0, 0.0, 0.0))
 
     def _clamp_to_arena(self) -> None:
-        """Walls stop the robot: push the footprint back inside, keeping its heading."""
-        p = self.params
-        corners = self._corners()
-        xs = [c[0] for c in corners]
-        ys = [c[1] for c in corners]
-        if min(xs) < 0.0:
-            self.x -= min(xs)
-        elif max(xs) > p.arena_length:
-            self.x -= max(xs) - p.arena_length
-        if min(ys) < 0.0:
-            self.y -= min(ys)
-        elif max(ys) > p.arena_width:
-            self.y -= max(ys) - p.arena_width
-
-    def _move_lift(self, dt: float) -> None:
-        p = self.params
-        duty = self._duty[LIFT]
-        at_top = self.lift_pos >= 1.0 and duty > 0.0
-        at_bottom = self.lift_pos <= 0.0 and duty < 0.0
-        if self._lift_jammed or at_top or at_bottom:
-            # A stalled screw does not turn: the motor is held at zero speed.
-            self._speed[LIFT] = 0.0
-            self._lift_blocked = duty != 0.0
-            return
-        self._lift_blocked = False
-        pos = self.lift_pos + self._speed[LIFT] / p.lift_stroke_time * dt
-        if pos >= 1.0 or pos <= 0.0:
-            pos = min(1.0, max(0.0, pos))
-            self._speed[LIFT] = 0.0
-        self.lift_pos = pos
-
-    def _dig_and_dump(self, dt: float) -> None:
-        p = self.params
-        # Both chain motors drive one belt: its speed is their mean in the digging sense.
-        chain = sum(_MOUNT[n] * self._speed[n] for n in CHAINS) / len(CHAINS)
-        self._chain_dig_speed = max(0.0, chain)
-        in_soil = self.lift_pos < p.dig_lift_max
-        in_dig_region = self.front_x() >= p.dig_region_start
-        self._digging = False
-        if chain > 0.0 and in_soil and in_dig_region:
-            room = max(0.0, p.bin_capacity - self.bin_kg)
-            dug = min(room, p.dig_rate * chain * dt)
-            if dug > 0.0:
-                self.bin_kg += dug
-                self.excavated_kg += dug
-                self._digging = True
-        if self.lift_pos > p.dump_lift_min and self.bin_kg > 0.0:
-            out = min(self.bin_kg, p.dump_rate * dt)
-            self.bin_kg -= out
-            if self.at_collector():
-                self.delivered_kg += out
-            else:
-                self.spilled_kg += out
+        self.floor.clamp(self)
 
     def _drain_battery(self, dt: float) -> None:
         p = self.params
         current = p.idle_current
         for name in WHEELS:
             current += abs(self._duty[name]) * p.wheel_current
-        for name in CHAINS:
-            current += abs(self._duty[name]) * p.chain_current
-            if self._digging:
-                current += p.dig_current * self._chain_dig_speed
-        lift_amps = p.lift_stall_current if self._lift_blocked else p.lift_current
-        current += abs(self._duty[LIFT]) * lift_amps
+        current = self.ble.add_current(current)
         self.battery_current = current
         self.battery_soc = max(0.0, self.battery_soc - current * dt / p.battery_capacity_c)
         ocv = self._ocv(self.battery_soc)
@@ -692,6 +605,10 @@ class MarteWorld:
         v0, v1 = volts[i - 1], volts[i]
         return v0 + (v1 - v0) * (soc - s0) / (s1 - s0)
 
+    def corners(self) -> tuple[tuple[float, float], ...]:
+        """Footprint corners (see `_corners`), for the floor this chassis stands on."""
+        return self._corners()
+
     def _corners(self) -> tuple[tuple[float, float], ...]:
         """Footprint corners: front-left, front-right, rear-left, rear-right (world x, y),
         worked out again only when the pose moved (the docking buttons read them every
@@ -710,13 +627,21 @@ class MarteWorld:
     def _sample_noise(self) -> None:
         """Draw this step's sensor noise once, so repeated reads agree and runs repeat."""
         p = self.params
-        self._noise = {
-            "base.battery": self._clipped_gauss(p.v_sensor_noise),
-            "ble.lift_pot": self._clipped_gauss(p.pot_noise),
-            "ble.load_cell": self._clipped_gauss(p.load_cell_noise),
-        }
+        self._noise = {"base.battery": clipped_gauss(self._rng, p.v_sensor_noise)}
+        self.ble.sample_noise(self._rng)
 
-    def _clipped_gauss(self, sigma: float) -> float:
-        if sigma <= 0.0:
-            return 0.0
-        return max(-3.0 * sigma, min(3.0 * sigma, self._rng.gauss(0.0, sigma)))
+
+def marte_part(ctx: Any, module: str, config: Any) -> MarteWorld:
+    """`ramp.emulators` entry `module.base`: MARTE's chassis (this model; the rig's seeded
+    one when it handed one in, an empty arena otherwise). Its floor, the arena, is shared as
+    "floor" for any other part that stands on it."""
+    world: MarteWorld = ctx.shared("marte", MarteWorld)
+    ctx.shared("floor", lambda: world.floor)
+    return world
+
+
+def ble_part(ctx: Any, module: str, config: Any) -> BucketLadderExcavator:
+    """`ramp.emulators` entry `module.ble`: the Bucket Ladder Excavator part, carried (and
+    stepped, see `firmware_like.bucket_ladder`) by MARTE's chassis."""
+    world: MarteWorld = ctx.shared("marte", MarteWorld)
+    return world.ble

@@ -23,11 +23,13 @@ No threads: everything happens in `tick(now)`, which the test or the simulator c
 
 from __future__ import annotations
 
+import logging
 import math
 import struct
 from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import can
 
@@ -260,3 +262,25 @@ def _next(due: float, period: float, now: float) -> float:
     if due <= now + _EPS:
         due = now + period
     return due
+
+
+def emulated_bus(ctx: Any, bc: Any) -> dict[str, Any]:
+    """`ramp.emulators` entry `bus.can`: ODrive emulators on python-can's virtual bus, one per
+    motor's node id, moving the world's motors; the real driver talks CAN frames to them."""
+    labels = ctx.motor_labels(bc.name, "node_id")
+    max_vel = float(bc.params["max_vel"])
+    world = ctx.signals
+
+    def on_velocity(node: int, turns_per_s: float) -> None:
+        label = labels.get(node)
+        if label is not None:
+            world.set_motor(label, max(-1.0, min(1.0, turns_per_s / max_vel)))
+
+    channel = f"ramp-sim-{id(ctx):x}-{bc.name}"
+    emulator = ODriveEmulator(channel, sorted(labels), on_velocity=on_velocity)
+    ctx.add_device(emulator)
+    ctx.add_service(emulator.tick)
+    ctx.emulated[bc.name] = emulator
+    logging.getLogger("ramp.sim").info("bus %s: ODrive emulators (nodes %s) on virtual CAN",
+                                       bc.name, ",".join(map(str, sorted(labels))))
+    return {"interface": "virtual", "channel": channel}

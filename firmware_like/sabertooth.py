@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import logging
 import os
 import select
 import socket
@@ -34,8 +35,11 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 from firmware_like.pty_link import PtyLink
+
+log = logging.getLogger("ramp.sim")
 
 MotorHook = Callable[[int, int, float], None]
 PacketHook = Callable[[float, int, int, int], None]
@@ -245,6 +249,27 @@ class SabertoothPtyDevice:
 
 
 # -- standalone ---------------------------------------------------------------------------------
+def emulated_bus(ctx: Any, bc: Any) -> dict[str, Any]:
+    """`ramp.emulators` entry `bus.sabertooth`: this emulator behind a pty, moving the world's
+    motors by their YAML labels; the real driver opens the pty's path (the params returned)."""
+    labels = ctx.motor_labels(bc.name, "address", "motor")
+    world = ctx.signals
+
+    def on_motor(address: int, motor: int, duty: float) -> None:
+        label = labels.get((address, motor))
+        if label is not None:
+            world.set_motor(label, duty)
+
+    addresses = sorted({a for a, _ in labels}) or [128]
+    link = PtyLink(bc.name, ctx.dir)
+    emulator = SabertoothEmulator(addresses, on_motor=on_motor, baud=bc.params["baud"],
+                                  paced=True)
+    ctx.add_pty_device(bc.name, SabertoothPtyDevice(link, emulator))
+    log.info("bus %s: Sabertooth emulator (addresses %s) on %s", bc.name,
+             ",".join(map(str, addresses)), link.path)
+    return {"port": link.path}
+
+
 def describe(t: float, address: int, command: int, data: int) -> str:
     name = _COMMAND_NAMES.get(command, "unknown")
     return f"{t:10.3f}  {address} {command:3d} {data:3d}  {name}"

@@ -71,8 +71,10 @@ def cmd_check(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return EXIT_CONFIG
     assert config is not None
+    rules = len(config.interlocks)
     print(f"{args.file}: ok ({len(config.buses)} buses, {len(config.modules)} modules: "
-          f"{', '.join(config.modules) or 'none'})")
+          f"{', '.join(config.modules) or 'none'}"
+          + (f"; {rules} interlock{'s' if rules != 1 else ''}" if rules else "") + ")")
     return 0
 
 

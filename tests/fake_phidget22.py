@@ -1,4 +1,5 @@
-"""A fake `Phidget22` package for the autonomy's Spatial and RCServo drivers.
+"""A fake `Phidget22` package for the Spatial and RCServo drivers (the autonomy's gimbal and
+IMU, the backend's servo channels).
 
 `install(monkeypatch)` puts it in `sys.modules` under the real module names, so the drivers'
 own `from Phidget22.Devices.Spatial import Spatial` runs unchanged. The fake keeps Phidget22's
@@ -201,6 +202,14 @@ class FakeRCServo(FakeChannel):
         self.calls.append("setOnTargetPositionReachedHandler")
         self.handlers["reached"] = h
 
+    def getMinPulseWidthLimit(self) -> float:
+        self.need_attached()
+        return 500.0
+
+    def getMaxPulseWidthLimit(self) -> float:
+        self.need_attached()
+        return 2500.0
+
     def setMinPulseWidth(self, us: float) -> None:
         self.need_attached()
         self.min_pulse = us
@@ -280,6 +289,9 @@ class FakeRCServo(FakeChannel):
             self.target = p
             self.writes.append(("target", p))
         handler(self, code, "" if code == 0 else "failed")
+
+    def getEngaged(self) -> bool:
+        return self.engaged
 
     def setEngaged(self, on: bool) -> None:
         self.need_attached()

@@ -150,6 +150,9 @@ class Harness:
 
 REPO = __import__("pathlib").Path(__file__).resolve().parent.parent
 MARTE_YAML = (REPO / "ramp.yaml").read_text()
+SCOUT_YAML = (REPO / "examples" / "robots" / "scout.yaml").read_text()
+#: The robots the contract tests run on (SPEC 10): name -> (config text, a MARTE model?).
+ROBOTS = {"marte": (MARTE_YAML, True), "scout": (SCOUT_YAML, False)}
 
 
 class SimHarness(Harness):
@@ -157,14 +160,18 @@ class SimHarness(Harness):
     (`ramp.simulation.backplane.SimBackplane`)."""
 
     def __init__(self, yaml_text: str = MARTE_YAML, wire_level: bool = True,
-                 seed: int = 0, recorder: Any = None, observer: Any = None) -> None:
+                 seed: int = 0, recorder: Any = None, observer: Any = None,
+                 marte: bool = True) -> None:
+        """`marte`: hand the backplane a seeded MARTE model (False: the world is what the
+        config's emulators build, as for Scout; `world` is then the composed world)."""
         from firmware_like.marte import MarteWorld
         from ramp.simulation.backplane import SimBackplane
 
         self.clock = VirtualClock()
         self.config = config_from(yaml_text.replace("port: 5577", "port: 0"))
-        self.world = MarteWorld(seed=seed)
-        self.backplane = SimBackplane(self.config, self.world, wire_level=wire_level)
+        world = MarteWorld(seed=seed) if marte else None
+        self.backplane = SimBackplane(self.config, world, wire_level=wire_level)
+        self.world = self.backplane.world
         self.sup = build(self.config, self.clock, self.backplane.bus_factory,
                          host="127.0.0.1", port=0, recorder=recorder, observer=observer)
         self.backplane.attach(self.sup)
@@ -208,3 +215,9 @@ def start_ramp(args: list[str], env: dict[str, str] | None = None,
                 break
     proc.kill()
     raise AssertionError(f"no ready line; stderr: {proc.communicate()[1]}")
+
+
+def robot_harness(name: str, **kwargs: Any) -> SimHarness:
+    """One of `ROBOTS` on its emulators."""
+    text, marte = ROBOTS[name]
+    return SimHarness(text, marte=marte, **kwargs)

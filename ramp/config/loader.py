@@ -35,10 +35,12 @@ from ramp.common.yamlload import (
     parse_mapping,
     read_text,
 )
+from ramp.config.interlocks import check_interlocks
 from ramp.errors import ConfigError, ConfigErrors
 from ramp.hal import driver_class
 from ramp.hal.interfaces import Bus
 from ramp.layers.module_distribution import Module
+from ramp.layers.robot_distribution.interlocks import RuleSpec
 from ramp.layers.robot_distribution.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S
 from ramp.modules import module_class
 from ramp.recorder.config import RECORDER_FIELDS, RecorderConfig
@@ -118,6 +120,8 @@ class Config:
     recorder: RecorderConfig | None = None
     #: Line of some keys (`server.max_clients`), for checks made at run time.
     lines: Mapping[str, int] = field(default_factory=dict)
+    #: The checked rules of `interlocks:` (SPEC 11), in file order.
+    interlocks: tuple[RuleSpec, ...] = ()
 
 
 class _Checker:
@@ -200,7 +204,7 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
         return None, [ConfigError(exc.problem, file=name, line=exc.line)]
     c = _Checker(name)
     _report_bad_keys(c, root)
-    top = {"server", "watchdog", "scheduler", "buses", "modules", "recorder"}
+    top = {"server", "watchdog", "scheduler", "buses", "modules", "recorder", "interlocks"}
     for k in root:
         if k not in top:
             c.err(str(k), root.lines.get(k, 1),
@@ -213,7 +217,10 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
     sched = c.block(root, "scheduler", "scheduler", SCHEDULER_FIELDS)
     recorder = _recorder(c, root, name)
     buses, bus_classes = _buses(c, root)
+    modules_errors = len(c.errors)
     modules = _modules(c, root, buses, bus_classes)
+    interlocks = check_interlocks(root.get("interlocks"), root.lines.get("interlocks", 1),
+                                  modules, c.err, modules_ok=len(c.errors) == modules_errors)
     if c.errors:
         return None, c.errors
     cfg = Config(
@@ -226,6 +233,7 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
         modules=MappingProxyType(modules),
         recorder=recorder,
         lines=MappingProxyType({**_lines(root, "server"), **_lines(root, "recorder")}),
+        interlocks=interlocks,
     )
     return cfg, []
 

@@ -1,30 +1,25 @@
-"""Driver registry: YAML `driver:` names -> (module, class), imported lazily.
+"""Driver lookup: YAML `driver:` names -> Bus classes, through the `ramp.drivers` entry points.
 
-A missing vendor library (Phidget22, a CAN backend) breaks only the driver that needs it.
+RAMP's own drivers (sabertooth, phidget, can, sim) are registered in its `pyproject.toml`
+exactly as a plugin's are (`ramp.registry`); each is imported only when a bus uses it, so a
+missing vendor library breaks only the driver that needs it.
 """
 
 from __future__ import annotations
 
-import importlib
-
 from ramp.hal.interfaces import Bus
-
-DRIVERS: dict[str, tuple[str, str]] = {
-    "sim": ("ramp.hal.simio", "SimBus"),
-    "sabertooth": ("ramp.hal.sabertooth", "SabertoothBus"),
-    "phidget": ("ramp.hal.phidget", "PhidgetBus"),
-    "can": ("ramp.hal.odrive", "ODriveBus"),
-}
+from ramp.registry import RegistryError, drivers
 
 
 def driver_class(name: str) -> type[Bus]:
-    """The Bus class registered as `name`; ValueError lists the valid names."""
-    try:
-        module_name, class_name = DRIVERS[name]
-    except KeyError:
-        raise ValueError(
-            f"unknown driver {name!r} (expected one of: {', '.join(sorted(DRIVERS))})"
-        ) from None
-    module = importlib.import_module(module_name)
-    cls: type[Bus] = getattr(module, class_name)
+    """The Bus class registered as `name`; ValueError lists the valid names (or names the two
+    packages that both registered it)."""
+    cls = drivers().load(name)
+    if not (isinstance(cls, type) and issubclass(cls, Bus)):
+        raise RegistryError(f"driver {name!r} ({drivers().entry(name).value}) is not a Bus "
+                            "subclass")
     return cls
+
+
+def driver_names() -> list[str]:
+    return drivers().names()

@@ -35,6 +35,7 @@ bus to its controller's own timeout (`try_stop_motors`).
 from __future__ import annotations
 
 import logging
+import math
 import threading
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
@@ -44,7 +45,7 @@ from ramp.errors import ConfigError, DeviceError
 from ramp.schema import Field, check_block
 
 #: Channel kinds a bus may offer; YAML device entries name one through their module's schema.
-KINDS = ("motor", "analog_in", "digital_in", "digital_out", "bridge_in")
+KINDS = ("motor", "analog_in", "digital_in", "digital_out", "bridge_in", "servo")
 
 #: Called with (channel label, value) for every command a bus hands to its driver.
 CommandHook = Callable[[str, float], None]
@@ -123,6 +124,47 @@ class DigitalOutput:
         """A channel with no bus (a stand-in in a test) sees its new state here."""
 
 
+class ServoChannel:
+    """An RC servo: a target position in degrees, reached no faster than a speed limit.
+
+    The controller (a Phidget RCServo board, an emulator) ramps the pulse toward the target at
+    `speed_dps` and reports the position it is sending; RC servos have no other feedback.
+    `target` is the one copy of the command, which the driver reads when it sends; `read()` is
+    the position the bus's last tick collected (NaN before the first). A stop holds the servo
+    where it is (its target becomes the position it reports): an arm that lets go falls."""
+
+    def __init__(self, bus: Bus, label: str) -> None:
+        self.bus = bus
+        self.label = label
+        #: The position commanded now (degrees), None until the first command.
+        self.target: float | None = None
+        #: The speed limit of the move to `target`, degrees per second.
+        self.speed_dps = 0.0
+        #: The position the controller reported at the bus's last tick (NaN before one).
+        self.position = float("nan")
+
+    def move(self, deg: float, speed_dps: float) -> None:
+        """Command a move to `deg` at `speed_dps`. The router validated the request; a value
+        that is not finite or a speed <= 0 is a bug above: refused, never clamped."""
+        if not (math.isfinite(deg) and math.isfinite(speed_dps) and speed_dps > 0.0):
+            raise ValueError(f"{self.label}: move to {deg!r} at {speed_dps!r} deg/s")
+        bus = self.bus
+        if bus is None:
+            self.target, self.speed_dps = deg, speed_dps
+            return
+        bus.command_servo(self, deg, speed_dps)
+
+    def hold(self) -> None:
+        """Stop where it is: the target becomes the reported position (nothing before one)."""
+        if math.isfinite(self.position):
+            self.move(self.position, self.speed_dps or 1.0)
+        elif self.bus is not None:
+            self.bus.command_servo(self, None, self.speed_dps)
+
+    def read(self) -> float:
+        return self.position
+
+
 class BridgeInput(ABC):
     """A Wheatstone bridge input (load cell), in mV/V."""
 
@@ -165,6 +207,7 @@ class Bus(ABC):
         self.is_open = False
         self.motors: list[MotorChannel] = []
         self.outputs: list[DigitalOutput] = []
+        self.servos: list[ServoChannel] = []
         #: Asked before motion output; False means the loop has stalled and not yet stopped
         #: everything, so what is about to go out is stale. The runtime sets it.
         self.gate: Callable[[], bool] = _always
@@ -198,6 +241,8 @@ class Bus(ABC):
             self.motors.append(ch)
         elif isinstance(ch, DigitalOutput):
             self.outputs.append(ch)
+        elif isinstance(ch, ServoChannel):
+            self.servos.append(ch)
         return ch
 
     @abstractmethod
@@ -233,6 +278,24 @@ class Bus(ABC):
         if self.on_command is not None:
             self.on_command(ch.label, float(on))
 
+    def command_servo(self, ch: ServoChannel, deg: float | None, speed_dps: float) -> None:
+        """A servo of this bus is sent to `deg` (None: no target, the servo is left where it
+        is) at `speed_dps`: record it, let the driver send it. Gated like a motor."""
+        if not self.gate():
+            return
+        with self.lock:
+            ch.target, ch.speed_dps = deg, speed_dps
+            if self.is_open:
+                try:
+                    self._servo_changed(ch)
+                except Exception as exc:  # noqa: BLE001 - a driver bug: this bus's fault
+                    self._driver_raised(exc, "a servo command")
+        if self.on_command is not None and deg is not None:
+            self.on_command(ch.label, deg)
+
+    def _servo_changed(self, ch: ServoChannel) -> None:  # noqa: B027 - optional hook
+        """Driver hook: `ch.target` or `ch.speed_dps` changed (bus open, lock held)."""
+
     def _driver_raised(self, exc: Exception, where: str) -> None:
         """A command hook raised (it should have set `failure`): the next `tick` faults the
         bus, as for an I/O error; the traceback is logged once per bus."""
@@ -263,6 +326,8 @@ class Bus(ABC):
             self.failure = None
             for m in self.motors:
                 m.duty = 0.0
+            for sv in self.servos:
+                sv.target, sv.position = None, math.nan
             self._open(now)
             self.is_open = True
 
@@ -292,6 +357,8 @@ class Bus(ABC):
         with self.lock:
             for m in self.motors:
                 m.duty = 0.0
+            for sv in self.servos:  # hold where it is
+                sv.target = sv.position if math.isfinite(sv.position) else None
             if self.is_open:
                 self._stop_motors()
 
@@ -327,6 +394,12 @@ class Bus(ABC):
         """True once the device answers: open, and (for boards that attach asynchronously,
         like Phidgets) every channel attached. Modules attach only on ready buses."""
         return self.is_open
+
+    def waiting(self) -> str:
+        """Why an open bus is not ready yet, once that is worth telling the operator (a board
+        that attaches asynchronously and is not plugged in); "" otherwise. The runtime logs
+        it once and says "back" only when the bus becomes ready."""
+        return ""
 
     def fileno(self) -> int | None:
         """A file descriptor the scheduler can wait on for input (or a hang-up), or None."""

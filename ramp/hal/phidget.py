@@ -23,13 +23,21 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
+from ramp.common import phidget22 as pc
 from ramp.errors import ConfigError, DeviceError
-from ramp.hal.interfaces import AnalogInput, BridgeInput, Bus, DigitalInput, DigitalOutput
+from ramp.hal.interfaces import (
+    AnalogInput,
+    BridgeInput,
+    Bus,
+    DigitalInput,
+    DigitalOutput,
+    ServoChannel,
+)
 from ramp.schema import Field
 
 log = logging.getLogger(__name__)
 
-INSTALL_HINT = "install it with: pip install 'ramp[phidget]' and apt-get install libusb-1.0-0"
+INSTALL_HINT = pc.INSTALL_HINT
 
 #: Gains the PhidgetBridge 1046 offers; Phidget22 names them BridgeGain.BRIDGE_GAIN_<n>.
 BRIDGE_GAINS = (1, 8, 16, 32, 64, 128)
@@ -49,6 +57,7 @@ class PhidgetApi:
     PhidgetException: type[BaseException]
     BridgeGain: Any  # has BRIDGE_GAIN_1 ... BRIDGE_GAIN_128
     VoltageSensorType: Any = None  # has SENSOR_TYPE_VOLTAGE; None leaves the default
+    RCServo: Callable[[], Any] | None = None  # servo channels; None: this api has none
 
 
 def load_phidget22() -> PhidgetApi:
@@ -56,6 +65,7 @@ def load_phidget22() -> PhidgetApi:
     from Phidget22.BridgeGain import BridgeGain
     from Phidget22.Devices.DigitalInput import DigitalInput as PhDigitalInput
     from Phidget22.Devices.DigitalOutput import DigitalOutput as PhDigitalOutput
+    from Phidget22.Devices.RCServo import RCServo
     from Phidget22.Devices.VoltageInput import VoltageInput
     from Phidget22.Devices.VoltageRatioInput import VoltageRatioInput
     from Phidget22.PhidgetException import PhidgetException
@@ -69,12 +79,14 @@ def load_phidget22() -> PhidgetApi:
         PhidgetException=PhidgetException,
         BridgeGain=BridgeGain,
         VoltageSensorType=VoltageSensorType,
+        RCServo=RCServo,
     )
 
 
 # -- events -----------------------------------------------------------------------------------
 # Handlers run on libphidget22's threads and only ever put one of these tuples on the queue:
 # (event, slot index, payload).
+# The first three are the shared adapter's (`ramp.common.phidget22.common_handlers`).
 _ATTACH, _DETACH, _ERROR, _SAMPLE, _WRITTEN = "attach", "detach", "error", "sample", "written"
 Event = tuple[str, int, Any]
 
@@ -84,7 +96,10 @@ _API_CLASS = {
     "bridge_in": "VoltageRatioInput",
     "digital_in": "DigitalInput",
     "digital_out": "DigitalOutput",
+    "servo": "RCServo",
 }
+#: The widest a servo's position range is mapped (degrees each side of neutral).
+SERVO_SPAN_DEG = 180.0
 
 
 @dataclass(eq=False)
@@ -101,12 +116,15 @@ class _Slot:
     heard: bool = False  # a sample or an error event arrived since open
     error_code: int | None = None  # last error event, cleared by the next sample
     output: DigitalOutput | None = None  # digital out: its channel holds the state commanded
+    servo: ServoChannel | None = None  # servo: its channel holds the target commanded
+    servo_spec: tuple[float, float, float] = (1500.0, 10.0, 1.0)  # neutral_us, us/deg, sign
+    sent_servo: tuple[float, float] | None = None  # servo: (units, deg/s) last handed over
     sent: bool | None = None  # digital out: the state last handed to the library
     retry_at: float = -math.inf
 
     @property
     def is_input(self) -> bool:
-        return self.kind != "digital_out"
+        return self.kind not in ("digital_out", "servo")
 
     @property
     def want(self) -> bool:
@@ -150,6 +168,18 @@ class _DigitalIn(DigitalInput):
         return bool(self._slot.value)
 
 
+class _Servo(ServoChannel):
+    def __init__(self, bus: PhidgetBus, label: str, slot: _Slot) -> None:
+        super().__init__(bus, label)
+        self._slot = slot
+        slot.servo = self  # the bus's tick hands its target to the library when attached
+
+    def read(self) -> float:
+        v = self._slot.value
+        self.position = math.nan if v is None else float(v)
+        return self.position
+
+
 class _DigitalOut(DigitalOutput):
     def __init__(self, bus: PhidgetBus, label: str, slot: _Slot) -> None:
         super().__init__(bus, label)
@@ -161,6 +191,7 @@ _HAL_CLASS: dict[str, type] = {
     "bridge_in": _Bridge,
     "digital_in": _DigitalIn,
     "digital_out": _DigitalOut,
+    "servo": _Servo,
 }
 
 
@@ -183,6 +214,14 @@ class PhidgetBus(Bus):
             "channel": Field(int, lo=0, hi=3, what="a bridge input"),
             "gain": Field(int, 128, choices=BRIDGE_GAINS, what="a bridge gain"),
         },
+        # An RC servo on a Phidget servo controller (RCServo): degrees map linearly onto the
+        # pulse, `neutral_us` at 0 deg, `us_per_deg` per degree, negated when `reversed`.
+        "servo": {
+            "channel": Field(int, lo=0, hi=15, what="an RC servo channel"),
+            "neutral_us": Field(float, 1500.0, lo=500.0, hi=2500.0, what="a pulse width in us"),
+            "us_per_deg": Field(float, 10.0, lo=1.0, hi=50.0, what="microseconds per degree"),
+            "reversed": Field(bool, False),
+        },
     }
 
     def __init__(
@@ -203,6 +242,8 @@ class PhidgetBus(Bus):
         #: Some channel needs the per-channel pass of `_tick` (attaching, not heard from, an
         #: output not yet as commanded); idle ticks skip it.
         self._care = True
+        #: Open, past `attach_timeout`, and no channel attached: the board is not plugged in.
+        self._waiting = False
         #: Error events seen, per Phidget22 error-event code (for health reports and tests).
         self.error_counts: dict[int, int] = {}
 
@@ -214,12 +255,15 @@ class PhidgetBus(Bus):
         if slot is None:
             slot = _Slot(kind=kind, channel=channel, gain=gain)
             self._slots.append(slot)
-        elif kind == "digital_out":
+        elif kind in ("digital_out", "servo"):
             raise ConfigError(
-                f"digital_out channel {channel} is already driven by {slot.who()}", key=label)
+                f"{kind} channel {channel} is already driven by {slot.who()}", key=label)
         elif kind == "bridge_in" and slot.gain != gain:
             raise ConfigError(
                 f"bridge_in channel {channel} already uses gain {slot.gain}", key=label)
+        if kind == "servo":
+            slot.servo_spec = (spec["neutral_us"], spec["us_per_deg"],
+                               -1.0 if spec["reversed"] else 1.0)
         slot.labels.append(label)
         return _HAL_CLASS[kind](self, label, slot)
 
@@ -232,6 +276,7 @@ class PhidgetBus(Bus):
         self._queue = q
         self._opened_at = now
         self._care = True
+        self._waiting = False
         for slot in self._slots:
             slot.attached = False
             slot.value = None
@@ -249,7 +294,7 @@ class PhidgetBus(Bus):
             raise
         except api.PhidgetException as exc:
             self._close()
-            raise DeviceError(self.name, f"cannot open the Phidget channels: {_describe(exc)}"
+            raise DeviceError(self.name, f"cannot open the Phidget channels: {pc.describe(exc)}"
                               ) from exc
 
     def _load_api(self) -> PhidgetApi:
@@ -283,35 +328,25 @@ class PhidgetBus(Bus):
             raise self._api_error from exc
 
     def _setup(self, ch: Any, slot: _Slot, idx: int, q: queue.SimpleQueue[Event]) -> None:
-        """Matching and handlers, all before `open()` as Phidget22 requires."""
-        ch.setDeviceSerialNumber(self.serial)
-        ch.setHubPort(self.hub_port)
-        ch.setChannel(slot.channel)
+        """Matching and handlers, all before `open()` as Phidget22 requires (the shared
+        adapter's: its attach, detach and error events are this driver's)."""
+        pc.match(ch, self.serial, self.hub_port, slot.channel)
         if self.label:
             ch.setDeviceLabel(self.label)
+        pc.common_handlers(ch, q, idx)
 
-        # These run on libphidget22's threads: put an event on the queue and nothing else.
-        def on_attach(_ch: Any) -> None:
-            q.put((_ATTACH, idx, None))
-
-        def on_detach(_ch: Any) -> None:
-            q.put((_DETACH, idx, None))
-
-        def on_error(_ch: Any, code: Any, description: Any) -> None:
-            q.put((_ERROR, idx, (code, description)))
-
+        # Runs on libphidget22's threads: put an event on the queue and nothing else.
         def on_sample(_ch: Any, value: Any) -> None:
             q.put((_SAMPLE, idx, value))
 
-        ch.setOnAttachHandler(on_attach)
-        ch.setOnDetachHandler(on_detach)
-        ch.setOnErrorHandler(on_error)
         if slot.kind == "analog_in":
             ch.setOnVoltageChangeHandler(on_sample)
         elif slot.kind == "bridge_in":
             ch.setOnVoltageRatioChangeHandler(on_sample)
         elif slot.kind == "digital_in":
             ch.setOnStateChangeHandler(on_sample)
+        elif slot.kind == "servo":
+            ch.setOnPositionChangeHandler(on_sample)
 
     def _tick(self, now: float, dt: float) -> None:
         # Only what is queued now: a library thread that keeps producing cannot hold the tick.
@@ -331,13 +366,24 @@ class PhidgetBus(Bus):
             elif slot.kind == "digital_out":
                 self._flush(slot, idx, now)
                 care = care or slot.sent != slot.want
+            elif slot.kind == "servo":
+                self._flush_servo(slot, idx, now)
+                care = care or slot.sent_servo != _servo_want(slot)
         ready = self.ready()
         if not ready and now - self._opened_at > self.attach_timeout:
-            raise self._timeout_error()
+            if any(s.attached for s in self._slots):
+                raise self._timeout_error()  # the board is there: a wrong channel, no data
+            # No board at all: the library attaches the open channels by itself when one is
+            # plugged in, so waiting is all there is to do (re-opening every few seconds only
+            # made the bus flap between "back" and "fault"; issue 19.8).
+            self._waiting = True
         self._care = care or not ready
 
     def _output_changed(self, ch: DigitalOutput) -> None:
         self._care = True  # the tick hands the new state to the library
+
+    def _servo_changed(self, ch: ServoChannel) -> None:
+        self._care = True  # the tick hands the new target to the library
 
     def _handle(self, slot: _Slot, event: str, payload: Any, now: float) -> None:
         if event != _SAMPLE or not slot.heard:
@@ -345,6 +391,10 @@ class PhidgetBus(Bus):
         if event == _SAMPLE:
             if slot.kind == "bridge_in":
                 slot.value = float(payload) * 1000.0  # V/V -> mV/V
+            elif slot.kind == "servo":
+                slot.value = slot.servo_spec[2] * float(payload)  # units -> degrees
+                if slot.servo is not None:
+                    slot.servo.position = slot.value
             elif slot.kind == "digital_in":
                 slot.value = bool(payload)
             else:
@@ -355,6 +405,7 @@ class PhidgetBus(Bus):
             slot.attached = True
             self._configure(slot)
             slot.sent = None  # re-write the output state on every attach
+            slot.sent_servo = None
             slot.retry_at = -math.inf
         elif event == _DETACH:
             slot.attached = False
@@ -368,6 +419,15 @@ class PhidgetBus(Bus):
                 slot.error_code = key
                 log.warning("bus %s: Phidget %s (%s): error event %s: %s",
                             self.name, slot.where(), slot.who(), key, description)
+        elif event == _WRITTEN and slot.kind == "servo":
+            want, code = payload
+            if code and slot.sent_servo == want:
+                slot.sent_servo = None
+                slot.retry_at = now + WRITE_RETRY_S
+                log.warning("bus %s: Phidget %s (%s): target %s failed with code %s",
+                            self.name, slot.where(), slot.who(), want[0], code)
+            elif not code:
+                self._engage(slot)
         elif event == _WRITTEN:
             state, code = payload
             if code and slot.sent == state:
@@ -387,6 +447,11 @@ class PhidgetBus(Bus):
                     ch.setSensorType(api.VoltageSensorType.SENSOR_TYPE_VOLTAGE)
                 ch.setDataInterval(self._interval_ms(ch))
                 ch.setVoltageChangeTrigger(0.0)  # an event every interval, changed or not
+            elif slot.kind == "servo":
+                neutral, per_deg, _ = slot.servo_spec
+                lo = max(-SERVO_SPAN_DEG, (ch.getMinPulseWidthLimit() - neutral) / per_deg)
+                hi = min(SERVO_SPAN_DEG, (ch.getMaxPulseWidthLimit() - neutral) / per_deg)
+                pc.set_servo_range(ch, neutral, per_deg, lo, hi)
             elif slot.kind == "bridge_in":
                 ch.setBridgeGain(getattr(api.BridgeGain, f"BRIDGE_GAIN_{slot.gain}"))
                 ch.setBridgeEnabled(True)
@@ -394,7 +459,7 @@ class PhidgetBus(Bus):
                 ch.setVoltageRatioChangeTrigger(0.0)
         except api.PhidgetException as exc:
             raise DeviceError(
-                self.name, f"cannot configure Phidget {slot.where()}: {_describe(exc)}",
+                self.name, f"cannot configure Phidget {slot.where()}: {pc.describe(exc)}",
                 slot.who(),
             ) from exc
 
@@ -444,7 +509,45 @@ class PhidgetBus(Bus):
             slot.sent = None
             slot.retry_at = now + WRITE_RETRY_S
             log.warning("bus %s: Phidget %s (%s): writing %s failed: %s",
-                        self.name, slot.where(), slot.who(), state, _describe(exc))
+                        self.name, slot.where(), slot.who(), state, pc.describe(exc))
+
+    def _flush_servo(self, slot: _Slot, idx: int, now: float) -> None:
+        """Hand a servo's target and speed limit to the library when attached and changed;
+        engage it once the controller holds the target (an RC servo jumps to whatever target
+        the controller holds when engaged)."""
+        want = _servo_want(slot)
+        if not slot.attached or want is None or slot.sent_servo == want or now < slot.retry_at:
+            return
+        api = self._api
+        assert api is not None
+        ch = slot.handle
+        q = self._queue
+
+        def on_done(code: int) -> None:
+            q.put((_WRITTEN, idx, (want, code)))  # library thread: queue only
+
+        try:
+            ch.setVelocityLimit(min(max(want[1], float(ch.getMinVelocityLimit())),
+                                    float(ch.getMaxVelocityLimit())))
+            sent_async = pc.send_target(ch, want[0], on_done)
+            slot.sent_servo = want
+            if not sent_async:
+                self._engage(slot)
+        except api.PhidgetException as exc:
+            slot.sent_servo = None
+            slot.retry_at = now + WRITE_RETRY_S
+            log.warning("bus %s: Phidget %s (%s): target %s failed: %s", self.name,
+                        slot.where(), slot.who(), want[0], pc.describe(exc))
+
+    def _engage(self, slot: _Slot) -> None:
+        api = self._api
+        assert api is not None
+        try:
+            if not slot.handle.getEngaged():
+                slot.handle.setEngaged(True)
+        except api.PhidgetException as exc:
+            log.warning("bus %s: Phidget %s (%s): engaging failed: %s", self.name,
+                        slot.where(), slot.who(), pc.describe(exc))
 
     def _timeout_error(self) -> DeviceError:
         missing = [s for s in self._slots if not s.attached]
@@ -466,6 +569,16 @@ class PhidgetBus(Bus):
             silent[0].who() if silent else "",
         )
 
+    def waiting(self) -> str:
+        """Why an open bus is not ready, once its board has been absent past
+        `attach_timeout` (the library attaches it when it is plugged in)."""
+        if not (self.is_open and self._waiting) or any(s.attached for s in self._slots):
+            return ""
+        serial = "any serial" if self.serial < 0 else f"serial {self.serial}"
+        names = " ".join(f"{s.kind} {s.channel}" for s in self._slots)
+        return (f"waiting for its board: Phidget {serial} ({names}) is not attached - "
+                "check the USB cable and the serial number")
+
     def ready(self) -> bool:
         """Open, every channel attached, and every input heard from (a sample, or an error
         event such as saturation: then `read()` gives NaN until a sample comes)."""
@@ -473,7 +586,11 @@ class PhidgetBus(Bus):
                                     for s in self._slots)
 
     def _stop_motors(self) -> None:
-        pass  # a Phidget board drives no motors
+        """A Phidget board drives no motors; its servos hold where they are, now (the HAL set
+        their targets to the positions they report)."""
+        for idx, slot in enumerate(self._slots):
+            if slot.kind == "servo" and slot.handle is not None:
+                self._flush_servo(slot, idx, math.inf)
 
     def _close(self) -> None:
         for slot in self._slots:
@@ -487,8 +604,9 @@ class PhidgetBus(Bus):
                 log.debug("bus %s: closing Phidget %s: %s", self.name, slot.where(), exc)
 
 
-def _describe(exc: BaseException) -> str:
-    """A PhidgetException as text: its code and description when it has them."""
-    code = getattr(exc, "code", None)
-    desc = getattr(exc, "details", "") or getattr(exc, "description", "") or str(exc)
-    return f"code {int(code)}: {desc}" if isinstance(code, int) else str(desc)
+def _servo_want(slot: _Slot) -> tuple[float, float] | None:
+    """What a servo slot should hold: (target in the library's units, speed limit)."""
+    ch = slot.servo
+    if ch is None or ch.target is None:
+        return None
+    return (slot.servo_spec[2] * ch.target, ch.speed_dps)

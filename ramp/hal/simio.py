@@ -19,6 +19,7 @@ from ramp.hal.interfaces import (
     DigitalInput,
     DigitalOutput,
     MotorChannel,
+    ServoChannel,
 )
 from ramp.schema import Field
 
@@ -36,6 +37,13 @@ class SimWorld(Protocol):
     def write_digital(self, name: str, on: bool) -> None: ...
     def read_bridge(self, name: str) -> float: ...
     def bus_present(self, bus: str) -> bool: ...
+
+
+class ServoWorld(Protocol):
+    """What a world with RC servos adds (optional: a world without them gets none)."""
+
+    def set_servo(self, name: str, target_deg: float | None, speed_dps: float) -> None: ...
+    def read_servo(self, name: str) -> float: ...
 
 
 class _Input:
@@ -72,9 +80,17 @@ class _Bridge(_Input, BridgeInput):
         return float(self.value)
 
 
+class _Servo(ServoChannel):
+    """A servo whose controller is the world's: commands go to `set_servo`, the position it
+    reports comes from `read_servo` at each tick."""
+
+    def sample(self, world: SimWorld) -> None:
+        self.position = float(world.read_servo(self.label))  # type: ignore[attr-defined]
+
+
 _CLASSES: dict[str, type] = {
     "motor": MotorChannel, "analog_in": _Analog, "digital_in": _DigitalIn,
-    "digital_out": DigitalOutput, "bridge_in": _Bridge,
+    "digital_out": DigitalOutput, "bridge_in": _Bridge, "servo": _Servo,
 }
 
 
@@ -101,8 +117,8 @@ class SimBus(Bus):
 
     def _make_channel(self, kind: str, label: str, spec: dict[str, Any]) -> Any:
         ch = _CLASSES[kind](self, label)
-        if isinstance(ch, _Input):
-            self.inputs.append(ch)
+        if isinstance(ch, (_Input, _Servo)):
+            self.inputs.append(ch)  # type: ignore[arg-type]
         return ch
 
     def _open(self, now: float) -> None:
@@ -113,6 +129,8 @@ class SimBus(Bus):
             self.world.set_motor(m.label, m.duty)
         for o in self.outputs:
             self.world.write_digital(o.label, o.state)
+        for sv in self.servos:
+            self._servo_changed(sv)
         self._sample()
 
     def _tick(self, now: float, dt: float) -> None:
@@ -135,9 +153,14 @@ class SimBus(Bus):
     def _output_changed(self, ch: DigitalOutput) -> None:
         self.world.write_digital(ch.label, ch.state)
 
+    def _servo_changed(self, ch: ServoChannel) -> None:
+        self.world.set_servo(ch.label, ch.target, ch.speed_dps)  # type: ignore[attr-defined]
+
     def _stop_motors(self) -> None:
         for m in self.motors:
             self.world.set_motor(m.label, 0.0)
+        for sv in self.servos:
+            self._servo_changed(sv)
 
     def _close(self) -> None:
         pass

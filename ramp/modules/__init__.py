@@ -1,24 +1,19 @@
-"""Module type registry: YAML `modules:` names (or their `type:`) -> module class, lazily."""
+"""Module type lookup: YAML `modules:` names (or their `type:`) -> module classes, through the
+`ramp.modules` entry points (RAMP's own base, ble, diff_base and demo are registered in its
+`pyproject.toml` like any plugin's; see `ramp.registry`)."""
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
 
-MODULE_TYPES: dict[str, tuple[str, str]] = {
-    "base": ("ramp.modules.base", "BaseModule"),
-    "ble": ("ramp.modules.ble", "BleModule"),
-    "demo": ("ramp.modules.demo", "DemoModule"),
-}
+from ramp.registry import modules
 
 
 def module_class(type_name: str) -> Any:
-    """The module class registered as `type_name` (a `ModuleFactory` with class attributes
+    """The module class registered as `type_name` (a `Module` subclass with class attributes
     `devices` and `settings`); ValueError lists the valid names."""
-    try:
-        mod, cls = MODULE_TYPES[type_name]
-    except KeyError:
-        raise ValueError(
-            f"unknown module type {type_name!r} (expected one of: "
-            f"{', '.join(sorted(MODULE_TYPES))})") from None
-    return getattr(importlib.import_module(mod), cls)
+    return modules().load(type_name)
+
+
+def module_types() -> list[str]:
+    return modules().names()

@@ -12,25 +12,34 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
-from ramp.hal.interfaces import AnalogInput, DigitalInput, DigitalOutput, MotorChannel
-from ramp.layers.functional import (
+from ramp.api import (
     BATTERY_FIELDS,
     BUTTON_FIELDS,
     DISPLAY_FIELDS,
     FILTER_FIELDS,
     MOTOR_FIELDS,
+    AnalogInput,
     BaseDrive,
+    Block,
     Button,
+    DeviceSpec,
+    DigitalInput,
+    DigitalOutput,
+    FlagParam,
+    FloatParam,
+    Function,
+    IntParam,
     Led,
+    Module,
     Motor,
+    MotorChannel,
+    Property,
     SystemVoltage,
+    Task,
+    Value,
     Voltage,
     VoltageDisplay,
 )
-from ramp.layers.module_distribution import DeviceSpec, Function, Module, Property, Task
-from ramp.mcp.messages import Value
-from ramp.mcp.params import FlagParam, FloatParam, IntParam
-from ramp.schema import Block
 
 WHEELS = ("lf_wheel", "lb_wheel", "rf_wheel", "rb_wheel")
 DISPLAY_LEDS = ("led_high", "led_mid", "led_low")

@@ -14,20 +14,27 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
-from ramp.hal.interfaces import AnalogInput, BridgeInput, MotorChannel
-from ramp.layers.functional import (
+from ramp.api import (
     LIFT_FIELDS,
     LOAD_CELL_FIELDS,
     MOTOR_FIELDS,
     POT_FIELDS,
+    AnalogInput,
+    Block,
+    BridgeInput,
     BucketLadder,
+    DeviceSpec,
+    FloatParam,
+    Function,
+    IntParam,
     LoadCell,
+    Module,
     Motor,
+    MotorChannel,
+    Property,
+    Task,
     ThompsonActuator,
 )
-from ramp.layers.module_distribution import DeviceSpec, Function, Module, Property, Task
-from ramp.mcp.params import FloatParam, IntParam
-from ramp.schema import Block
 
 
 class BleModule(Module):

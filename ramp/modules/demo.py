@@ -5,9 +5,16 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
-from ramp.layers.module_distribution import BoundDevice, DeviceSpec, Function, Module, Property
-from ramp.mcp.params import FlagParam, IntParam
-from ramp.schema import Block
+from ramp.api import (
+    Block,
+    BoundDevice,
+    DeviceSpec,
+    FlagParam,
+    Function,
+    IntParam,
+    Module,
+    Property,
+)
 
 
 class DemoModule(Module):

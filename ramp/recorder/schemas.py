@@ -47,6 +47,7 @@ EVENT_KINDS = {
     "watchdog_trip": "the watchdog stopped every module (a commander silent or lost)",
     "watchdog": "the watchdog armed (motion) or went idle (nothing moving)",
     "control": "control acquired, released or taken over",
+    "interlock": "an interlock rule became active (why) or was released",
     "stall": "the tick loop stalled and every module was stopped",
     "stop": "robot.stop or a module stop request",
     "fault": "a bus fault (the module state change says which module it hit)",
@@ -194,6 +195,8 @@ def _value_schema(value: Any) -> dict[str, Any]:
     kind = _KIND.get(type(value))
     if kind == "integer":
         return {"type": "number"}  # an int row may read as a float later (MCP's own typing)
+    if kind == "string":  # a row of names may hold several later (`interlock.active`)
+        return {"type": ["string", "array"], "items": {"type": "string"}}
     return {"type": kind} if kind else dict(_VALUE)
 
 

@@ -66,6 +66,8 @@ class Summary:
     faults_event: dict[str, list[int]] = field(default_factory=lambda: defaultdict(list))
     faults_health: dict[str, list[int]] = field(default_factory=lambda: defaultdict(list))
     events: Counter[str] = field(default_factory=Counter)
+    #: Activations per interlock rule (SPEC 11), from the `interlock` events.
+    interlocks: Counter[str] = field(default_factory=Counter)
     overruns: list[int] = field(default_factory=list)
     late_max_us: float = 0.0
     battery: dict[str, list[float]] = field(default_factory=dict)
@@ -115,6 +117,10 @@ class Summary:
             self.events[kind] += 1
             if kind == "watchdog_trip":
                 self.trips_event.append(t)
+            elif kind == "interlock":  # "NAME active: ..." or "NAME released"
+                name, _, rest = str(data.get("text", "")).partition(" ")
+                if not rest.startswith("released"):
+                    self.interlocks[name] += 1
         elif topic == TOPIC_LOG:
             level = int(data.get("level", 0))
             self.log_levels[level] += 1
@@ -207,6 +213,7 @@ class Summary:
             "battery": {k: {"min": v[0], "max": v[1], "last": v[2]}
                         for k, v in sorted(self.battery.items())},
             "events": dict(sorted(self.events.items())),
+            "interlocks": dict(self.interlocks),
             "log": {"warnings": self.log_levels[3], "errors": self.log_levels[4]
                     + self.log_levels[5],
                     "first_errors": [{"at_s": rel(t), "message": m}
@@ -271,6 +278,10 @@ def format_report(r: dict[str, Any]) -> str:
     lines.append("battery    " + ("; ".join(
         f"{k}: min {v['min']:g} V, max {v['max']:g} V, last {v['last']:g} V"
         for k, v in battery.items()) if battery else "-"))
+    interlocks = r.get("interlocks")
+    if interlocks:
+        lines.append("interlocks " + ", ".join(
+            f"{name} {n} activation{'s' if n != 1 else ''}" for name, n in interlocks.items()))
     lg = r["log"]
     lines.append(f"log        {lg['warnings']} warning{'s' if lg['warnings'] != 1 else ''}, "
                  f"{lg['errors']} error{'s' if lg['errors'] != 1 else ''}")

@@ -20,6 +20,7 @@ from ramp.hal.interfaces import Bus
 from ramp.layers.module_distribution import BoundDevice, Module
 from ramp.layers.robot_distribution import (
     Health,
+    Interlocks,
     ModuleRegistry,
     ModuleSlot,
     RobotDistribution,
@@ -78,7 +79,7 @@ def build(config: Config, clock: Clock | None = None, bus_factory: BusFactory | 
 
     manager = BusManager(buses, scheduler, buses_changed)
     robot = RobotDistribution(registry, Watchdog(config.watchdog_timeout), health,
-                              scheduler.stats)
+                              scheduler.stats, Interlocks(config.interlocks, slots))
     server = McpServer(scheduler, robot,
                        host=host if host is not None else config.server.host,
                        port=port if port is not None else config.server.port,
@@ -115,6 +116,9 @@ def _connect(sup: Supervisor, observer: Observer) -> None:
                 t, module, state, reason)
     if overridden(observer, "watchdog"):
         sup.watchdog.on_change = lambda state, why, t: observer.watchdog(t, state, why)
+    if overridden(observer, "interlock"):
+        sup.robot.interlocks.on_change = lambda name, active, why, t: observer.interlock(
+            t, name, active, why)
     if overridden(observer, "control"):
         sup.robot.on_control = lambda owner, peer, t: observer.control(t, owner, peer)
     if overridden(observer, "bus_fault"):

@@ -62,6 +62,10 @@ class BusManager:
         self.on_fault: FaultHook | None = None
         self._ready = {name: False for name in self.buses}
         self._waiting = True  # some open bus is not ready yet: each tick asks again
+        #: What each bus last said it waits for (logged once), and the buses that were down
+        #: (failed, or waiting) and will be reported "back" when they are ready again.
+        self._told: dict[str, str] = {}
+        self._down: set[str] = set()
         self._watched: dict[str, int] = {}
         for bus in self.buses.values():
             bus.gate = scheduler.on_time  # motion computed before a stall never goes out
@@ -119,9 +123,8 @@ class BusManager:
         """About once a second: reopen what is closed."""
         for name, bus in self.buses.items():
             if (not bus.is_open and not self.opener.busy(name)
-                    and now >= self.health[name].next_retry
-                    and self._try_open(name, bus, now)):
-                log.info("bus %s is back", name)
+                    and now >= self.health[name].next_retry):
+                self._try_open(name, bus, now)
         self._refresh(now)
 
     # -- faults -------------------------------------------------------------------------------
@@ -149,6 +152,7 @@ class BusManager:
         health.reason = exc.detail
         health.next_retry = now + RETRY_PERIOD
         log.log(logging.DEBUG if quiet else logging.ERROR, "bus %s fault: %s", name, exc.detail)
+        self._down.add(name)
         self._unwatch(name)
         try:
             self.buses[name].close()
@@ -195,6 +199,18 @@ class BusManager:
             if ready != self._ready[name]:
                 self._ready[name] = ready
                 changed = True
+                if ready:
+                    self._told.pop(name, None)
+                    if name in self._down:
+                        self._down.discard(name)
+                        log.info("bus %s is back", name)
+            elif not ready and bus.is_open:
+                waiting = bus.waiting()
+                if waiting and self._told.get(name) != waiting:
+                    self._told[name] = waiting
+                    self._down.add(name)
+                    self.health[name].reason = waiting
+                    log.warning("bus %s (%s) %s", name, bus.driver_name, waiting)
         # An open bus becomes ready only in its own tick (a board attaches); it stops being
         # ready only by failing, which refreshes too: with every open bus ready, the ticks
         # need not ask again.
@@ -213,6 +229,7 @@ class BusManager:
             return False
         health = self.health[name]
         if isinstance(result, DeviceError):
+            self._down.add(name)
             if health.reason != result.detail:
                 log.warning("bus %s (%s) unavailable: %s; retrying every %.0f s", name,
                             bus.driver_name, result.detail, RETRY_PERIOD)
@@ -220,7 +237,9 @@ class BusManager:
             health.next_retry = now + RETRY_PERIOD
             return False
         health.reason = ""
-        log.info("bus %s (%s) open", name, bus.driver_name)
+        # Open is not ready (a Phidget board attaches later, if it is there at all): "back"
+        # and "waiting" are said by `_refresh` when the bus's readiness shows it.
+        log.debug("bus %s (%s) open", name, bus.driver_name)
         self._watch(name, bus)
         self._waiting = True  # is it ready yet? the next refresh says
         return True
@@ -228,9 +247,8 @@ class BusManager:
     def _collect_opens(self, now: float) -> None:
         """Opens that were still running: take their results as soon as they are in."""
         for name, bus in self.buses.items():
-            was_down = self.health[name].reason != BusHealth.reason
-            if self.opener.busy(name) and self._try_open(name, bus, now) and was_down:
-                log.info("bus %s is back", name)
+            if self.opener.busy(name):
+                self._try_open(name, bus, now)
 
     def _watch(self, name: str, bus: Bus) -> None:
         """Wait on the bus's descriptor in the loop while it is open."""

@@ -18,6 +18,8 @@ The points (method, when, and the layer hook it is connected to):
   commander lost, tick loop stalled ...); `Watchdog.on_change`.
 - `control(t, owner, peer)`: control acquired, released, taken over;
   `RobotDistribution.on_control`.
+- `interlock(t, name, active, why)`: an interlock rule became active (or released);
+  `Interlocks.on_change`.
 - `stall(t, gap_s, unit)`: the loop stalled and every module was stopped first; the
   supervisor's stall handler.
 - `bus_fault(t, bus, reason)`: a bus failed and was closed (its modules fault);
@@ -48,7 +50,7 @@ if TYPE_CHECKING:
 
 #: The methods `build` connects when a subclass overrides them.
 POINTS = ("message_in", "message_out", "command", "module_state", "watchdog", "control",
-          "stall", "bus_fault", "tick", "tick_done")
+          "interlock", "stall", "bus_fault", "tick", "tick_done")
 
 
 class Observer:
@@ -77,6 +79,9 @@ class Observer:
 
     def control(self, t: float, owner: str, peer: str) -> None:
         """Control changed hands (`owner` is `none` once released)."""
+
+    def interlock(self, t: float, name: str, active: bool, why: str) -> None:
+        """An interlock rule became active or was released."""
 
     def stall(self, t: float, gap_s: float, unit: str) -> None:
         """The loop lost `gap_s` in `unit`; every module has been stopped."""
@@ -139,6 +144,9 @@ class FanOut(Observer):
 
     def control(self, t: float, owner: str, peer: str) -> None:
         self._call("control", t, owner, peer)
+
+    def interlock(self, t: float, name: str, active: bool, why: str) -> None:
+        self._call("interlock", t, name, active, why)
 
     def stall(self, t: float, gap_s: float, unit: str) -> None:
         self._call("stall", t, gap_s, unit)

@@ -112,6 +112,9 @@ class RecorderObserver(Observer):
     def module_state(self, t: float, module: str, state: str, reason: str) -> None:
         self.rec.module_state(t, module, state, reason)
 
+    def interlock(self, t: float, name: str, active: bool, why: str) -> None:
+        self.rec.event(t, "interlock", f"{name} {why}" if active else f"{name} released")
+
     def watchdog(self, t: float, state: str, why: str) -> None:
         if state == "tripped":
             self.rec.event(t, "watchdog_trip", f"every module stopped: {why}")

@@ -100,6 +100,10 @@ class Supervisor:
         sched = self.scheduler
         sched.add_task("buses", sched.rate_hz, self.bus_manager.tick)
         sched.add_task("watchdog", sched.rate_hz, self.robot.tick)
+        interlocks = self.robot.interlocks
+        if interlocks.rules:  # after the buses' samples, before any module's work
+            sched.add_task("interlocks", sched.rate_hz, interlocks.tick)
+            interlocks.tick(now, 0.0)  # what the first client sees is already evaluated
         sched.add_task("hotplug", self._divisor_rate(1.0), self.bus_manager.retry)
         sched.add_task("modules.retry", self._divisor_rate(1.0), self._retry_modules)
         for slot in self.slots.values():

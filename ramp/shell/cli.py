@@ -139,6 +139,14 @@ def watchdog_timeout(rows: Iterable[Response]) -> float | None:
     return None
 
 
+def interlocks_active(rows: Iterable[Response]) -> list[str] | None:
+    """The active interlocks in `robot.get`'s rows ([] for `none`), None without the row."""
+    for r in rows:
+        if (r.module, r.device, r.prop) == ("robot", "interlock", "active"):
+            return [str(v) for v in r.values if v != "none"]
+    return None
+
+
 def heartbeat_period(timeout: float | None) -> float:
     """A quarter of the watchdog timeout, so a late heartbeat or two never trips it."""
     t = 1.0 if timeout is None else timeout
@@ -376,9 +384,25 @@ class Shell:
         responses, raw = self.ask_main(text)
         if text or self.raw:
             self.show(responses, raw)
+        if any(r.prop == "error" and r.values and r.values[0] == "interlocked"
+               for r in responses):
+            self.explain_interlocks()
         if self.interactive:
             self.check_modules(responses)
         return EXIT_ERROR if has_errors(responses) else EXIT_OK
+
+    def explain_interlocks(self) -> None:
+        """After a request refused by an interlock: which rules are active now (SPEC 11)."""
+        try:
+            rows = self.ask_reader("robot:robot.get=()")
+        except ConnectionLost:
+            return
+        names = interlocks_active(rows)
+        if names is None:
+            return
+        shown = ", ".join(names) if names else "none any more"
+        self.say(f"active interlocks: {shown} (robot:robot.get=() shows them; a latched one "
+                 "is cleared with robot:interlock.reset=(NAME) once its condition has cleared)")
 
     def cmd_help(self) -> int:
         timeout = None

@@ -1,15 +1,18 @@
-"""The one simulation entry point: wires firmware_like emulators and physics to real drivers.
+"""The one simulation entry point: wires emulators and physics to real drivers, from the
+`ramp.emulators` entry points, with no branch per driver or module.
 
 `ramp run --sim` replaces every bus, except those marked `sim: false`, by its emulator:
-Sabertooth buses by the Sabertooth firmware emulator behind a pty (the real driver writes
-real packets), CAN buses by the ODrive emulator on python-can's virtual bus, and Phidget
-boards by the HAL-level sim driver (USB cannot be emulated). All of them move one MARTE
-physics model, stepped by a scheduler task on the supervisor's clock.
+a driver with a `bus.DRIVER` emulator (RAMP's: `sabertooth`, a firmware emulator behind a pty;
+`can`, ODrive emulators on python-can's virtual bus) keeps its real driver, opened on the
+emulator's port; any other bus becomes the HAL-level sim driver (USB boards such as Phidgets
+cannot be emulated at the wire). Both move one `World` (`firmware_like.world`) made of parts:
+each module type's `module.TYPE` emulator adds the physics of that module (MARTE's `base` and
+`ble` share one coupled model; Scout's `diff_base` a chassis on a flat floor; a plugin's arm
+its joints), stepped by a scheduler task on the supervisor's clock.
 
-The model knows MARTE's signals (`base.lf_wheel`, `ble.lift_pot`, ...). A config with other
-module names, or devices the model has no physics for, still runs: those signals go to a
-plain sim driver's world instead (motors and outputs are recorded, inputs read 0), so a new
-robot's wiring can be tried under --sim before it has a physics model.
+A module type with no emulator still runs: its signals are simulated plainly (motors and
+outputs recorded, inputs read 0), so a new robot's wiring can be tried under --sim before it
+has a physics model.
 """
 
 from __future__ import annotations
@@ -19,18 +22,22 @@ import select
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
-from firmware_like.marte import MarteWorld
+from firmware_like.world import World
 from ramp.config import BusConfig, Config
+from ramp.hal import driver_class
 from ramp.hal.interfaces import Bus
 from ramp.hal.simio import SimBus
+from ramp.registry import emulators
 from ramp.runtime import default_bus_factory
 
 if TYPE_CHECKING:
     from ramp.runtime.supervisor import Supervisor
 
 log = logging.getLogger("ramp.sim")
+
+T = TypeVar("T")
 
 #: How often `ramp run --sim` steps the physics (s^-1). One step of the MARTE model costs
 #: about as much as the rest of a tick together, and its longest piece is 0.05 s
@@ -49,115 +56,18 @@ def _readable(fds: list[int]) -> set[int]:
     return set(readable)
 
 
-class PlainSignals:
-    """The world of a plain sim driver: commands are remembered, inputs read zero."""
-
-    def __init__(self) -> None:
-        self.motors: dict[str, float] = {}
-        self.outputs: dict[str, bool] = {}
-
-    def set_motor(self, name: str, duty: float) -> None:
-        self.motors[name] = duty
-
-    def read_analog(self, name: str) -> float:
-        return 0.0
-
-    def read_digital(self, name: str) -> bool:
-        return False
-
-    def write_digital(self, name: str, on: bool) -> None:
-        self.outputs[name] = on
-
-    def read_bridge(self, name: str) -> float:
-        return 0.0
-
-    def bus_present(self, bus: str) -> bool:
-        return True
-
-
-class RoutedSignals:
-    """What the sim buses and the emulators drive: the physics model for every signal it
-    knows (it raises KeyError for the others), plain signals for the rest."""
-
-    def __init__(self, model: MarteWorld) -> None:
-        self.model = model
-        self.plain = PlainSignals()
-        self._plain_names: set[str] = set()
-        #: Inputs the `sim` module holds at a value (`sim:input.set`): name -> quantity.
-        self.overrides: dict[str, float] = {}
-        self._override_changes = 0
-
-    def _route(self, method: str, name: str, *args: Any) -> Any:
-        if name not in self._plain_names:
-            try:
-                return getattr(self.model, method)(name, *args)
-            except KeyError:
-                self._plain_names.add(name)
-                log.info("sim: %s is not a signal of the physics model; it is simulated "
-                         "plainly (commands recorded, inputs read 0)", name)
-        return getattr(self.plain, method)(name, *args)
-
-    def set_motor(self, name: str, duty: float) -> None:
-        self._route("set_motor", name, duty)
-
-    def read_analog(self, name: str) -> float:
-        if name in self.overrides:
-            return float(self._overridden(name))
-        return float(self._route("read_analog", name))
-
-    def read_digital(self, name: str) -> bool:
-        if name in self.overrides:
-            return bool(self._overridden(name))
-        return bool(self._route("read_digital", name))
-
-    def write_digital(self, name: str, on: bool) -> None:
-        self._route("write_digital", name, on)
-
-    def read_bridge(self, name: str) -> float:
-        if name in self.overrides:
-            return float(self._overridden(name))
-        return float(self._route("read_bridge", name))
-
-    def bus_present(self, bus: str) -> bool:
-        return self.model.bus_present(bus)
-
-    # -- the `sim` module's hooks -----------------------------------------------------------
-    def set_input(self, name: str, quantity: float) -> None:
-        """Input `name` reads as if it sensed `quantity` until `clear_input`."""
-        self.overrides[name] = quantity
-        self._override_changes += 1
-
-    def clear_input(self, name: str) -> None:
-        if self.overrides.pop(name, None) is not None:
-            self._override_changes += 1
-
-    def _overridden(self, name: str) -> float | bool:
-        """An overridden input's reading: through the model's sensor (the battery's rail
-        volts become pin volts) where the model knows it, else the value itself."""
-        quantity = self.overrides[name]
-        if name not in self._plain_names:
-            try:
-                return self.model.sensor_reading(name, quantity)
-            except KeyError:
-                pass
-        return quantity
-
-    @property
-    def revision(self) -> int:
-        """Moves on with the model and with every override: plain signals never change
-        what they read back."""
-        return int(self.model.revision) + self._override_changes
-
-
 class SimBackplane:
-    """Builds the simulated world and the bus for each config entry."""
+    """Builds the simulated world and the bus for each config entry; it is the
+    `EmulatorContext` (`ramp.api`) the emulators are built with."""
 
-    def __init__(self, config: Config, world: MarteWorld | None = None,
+    def __init__(self, config: Config, world: Any = None,
                  wire_level: bool = True, physics_hz: float | None = None,
                  read_in_wait: bool = True) -> None:
-        """`physics_hz`: how often the world is stepped (None: every tick, the default, so a
-        simulated run is the same at any tick rate); the emulated devices are serviced every
-        tick whatever it is, so their serial timeouts stay exact.
+        """`world`: a model to use for the modules whose emulator asks for it by the key
+        "marte" (the simulation rig hands in its seeded `MarteWorld`); None builds what the
+        emulators make. `physics_hz`: how often the world is stepped (None: every tick, the
+        default, so a simulated run is the same at any tick rate); the emulated devices are
+        serviced every tick whatever it is, so their serial timeouts stay exact.
 
         `read_in_wait`: an emulator behind a pty reads the driver's bytes the moment they
         arrive (the loop's wait watches the pty), as the tests and `ramp sim` want; False
@@ -168,100 +78,77 @@ class SimBackplane:
         self.physics_hz = physics_hz
         self.read_in_wait = read_in_wait
         self._physics_dt = 0.0
-        self.world = world if world is not None else MarteWorld()
-        #: The signals buses and emulators drive: the model's, and plain ones for the rest.
-        self.signals = RoutedSignals(self.world)
         self.wire_level = wire_level
-        self.devices: list[Any] = []  # emulated devices serviced every tick
+        self.devices: list[Any] = []  # emulated devices closed with the backplane
         self._tmp = tempfile.TemporaryDirectory(prefix="ramp-sim-")
         self.dir = Path(self._tmp.name)
         self.services: list[Callable[[float], Any]] = []
-        #: Emulated devices by bus name, for tests and benchmarks (unplug, packet logs).
+        #: Emulated devices behind a pty, by bus name (tests and benchmarks: unplug, logs).
         self.sabertooth: dict[str, Any] = {}
-        self.odrive: dict[str, Any] = {}
+        #: Every bus emulator by bus name, as its `bus.DRIVER` entry returned it.
+        self.emulated: dict[str, Any] = {}
+        self.odrive = self.emulated  # the name the tests of the CAN emulators use
         self._watched: dict[str, int] = {}
         #: Buses the `sim` module has unplugged.
         self.unplugged: set[str] = set()
         self.sim_module: Any = None  # the `sim` module, made by `attach`
+        self._shared: dict[str, Any] = {}
+        if world is not None:
+            self._shared["marte"] = world
+        #: The signals buses and emulators drive: the parts' and plain ones for the rest.
+        self.signals = World([world] if world is not None else [])
+        for name, mc in config.modules.items():
+            key = f"module.{mc.type}"
+            if key in emulators():
+                part = emulators().load(key)(self, name, mc)
+                if part is not None:
+                    self.signals.add(part)
+        #: The model the tests and the rig inspect: MARTE's when there is one, else the world.
+        self.world = self._shared.get("marte", self.signals)
 
-    def bus_factory(self, bc: BusConfig) -> Bus:
-        if not bc.sim:
-            log.info("bus %s keeps its real %s driver (sim: false)", bc.name, bc.driver)
-            return default_bus_factory(bc)
-        if self.wire_level:
-            bus = self._wire_level(bc)
-            if bus is not None:
-                return bus
-        return SimBus(bc.name, dict(bc.params), world=self.signals)
+    # -- EmulatorContext --------------------------------------------------------------------
+    def shared(self, key: str, make: Callable[[], T]) -> T:
+        """One object per key for the whole world: the parts that share a model or a floor."""
+        if key not in self._shared:
+            self._shared[key] = make()
+        out: T = self._shared[key]
+        return out
 
-    def _wire_level(self, bc: BusConfig) -> Bus | None:
-        """A real driver talking to an emulator, where one exists for this driver."""
-        if bc.driver == "sabertooth":
-            return self._sabertooth(bc)
-        if bc.driver == "can":
-            return self._odrive(bc)
-        return None
+    def add_device(self, device: Any) -> None:
+        """Closed (its `close()`) when the simulation ends."""
+        self.devices.append(device)
 
-    def _motor_labels(self, bus: str, key: str) -> dict[Any, str]:
-        """Channel key value (address/motor pair, node id) -> `module.device` on that bus."""
+    def add_service(self, service: Callable[[float], Any]) -> None:
+        """Called with the time at every tick, before the physics steps."""
+        self.services.append(service)
+
+    def add_pty_device(self, bus: str, device: Any) -> None:
+        """A device behind a pty (`device.link` a `PtyLink`, `device.service(now)` reads the
+        driver's bytes, `device.emulator.tick(now)` its timers): read as bytes arrive."""
+        self.devices.append(device.link)
+        self.sabertooth[bus] = device
+
+    def motor_labels(self, bus: str, *keys: str) -> dict[Any, str]:
+        """Channel key values (one key: its value; several: a tuple) -> `module.device`, for
+        the motors wired to `bus`."""
         out: dict[Any, str] = {}
         for mname, mc in self.config.modules.items():
             for dname, dc in mc.devices.items():
                 if dc.bus == bus and dc.kind == "motor":
-                    ident = (dc.channel["address"], dc.channel["motor"]) if key == "address" \
-                        else dc.channel[key]
-                    out[ident] = f"{mname}.{dname}"
+                    vals = tuple(dc.channel[k] for k in keys)
+                    out[vals[0] if len(vals) == 1 else vals] = f"{mname}.{dname}"
         return out
 
-    def _sabertooth(self, bc: BusConfig) -> Bus:
-        """The Sabertooth firmware emulator behind a pty; the real driver opens its path."""
-        from firmware_like.pty_link import PtyLink
-        from firmware_like.sabertooth import SabertoothEmulator, SabertoothPtyDevice
-        from ramp.hal.sabertooth import SabertoothBus
-
-        labels = self._motor_labels(bc.name, "address")
-        world = self.signals
-
-        def on_motor(address: int, motor: int, duty: float) -> None:
-            label = labels.get((address, motor))
-            if label is not None:
-                world.set_motor(label, duty)
-
-        addresses = sorted({a for a, _ in labels}) or [128]
-        link = PtyLink(bc.name, self.dir)
-        emulator = SabertoothEmulator(addresses, on_motor=on_motor, baud=bc.params["baud"],
-                                      paced=True)
-        device = SabertoothPtyDevice(link, emulator)
-        self.devices.append(link)
-        self.sabertooth[bc.name] = device
-        params = {**bc.params, "port": link.path}
-        log.info("bus %s: Sabertooth emulator (addresses %s) on %s", bc.name,
-                 ",".join(map(str, addresses)), link.path)
-        return SabertoothBus(bc.name, params)
-
-    def _odrive(self, bc: BusConfig) -> Bus:
-        """ODrive emulators on python-can's virtual bus; the real driver talks CAN frames."""
-        from firmware_like.odrive import ODriveEmulator
-        from ramp.hal.odrive import ODriveBus
-
-        labels = self._motor_labels(bc.name, "node_id")
-        max_vel = float(bc.params["max_vel"])
-        world = self.signals
-
-        def on_velocity(node: int, turns_per_s: float) -> None:
-            label = labels.get(node)
-            if label is not None:
-                world.set_motor(label, max(-1.0, min(1.0, turns_per_s / max_vel)))
-
-        channel = f"ramp-sim-{id(self):x}-{bc.name}"
-        emulator = ODriveEmulator(channel, sorted(labels), on_velocity=on_velocity)
-        self.devices.append(emulator)
-        self.services.append(emulator.tick)
-        self.odrive[bc.name] = emulator
-        params = {**bc.params, "interface": "virtual", "channel": channel}
-        log.info("bus %s: ODrive emulators (nodes %s) on virtual CAN", bc.name,
-                 ",".join(map(str, sorted(labels))))
-        return ODriveBus(bc.name, params)
+    # -- buses ------------------------------------------------------------------------------
+    def bus_factory(self, bc: BusConfig) -> Bus:
+        if not bc.sim:
+            log.info("bus %s keeps its real %s driver (sim: false)", bc.name, bc.driver)
+            return default_bus_factory(bc)
+        key = f"bus.{bc.driver}"
+        if self.wire_level and key in emulators():
+            params = emulators().load(key)(self, bc)
+            return driver_class(bc.driver)(bc.name, {**bc.params, **params})
+        return SimBus(bc.name, dict(bc.params), world=self.signals)
 
     def attach(self, sup: Supervisor) -> None:
         """Step the world (and service emulators) first in every tick; emulators behind a pty
@@ -277,15 +164,16 @@ class SimBackplane:
 
     # -- the `sim` module's hooks (SPEC 12) ---------------------------------------------------
     def unplug(self, bus: str) -> None:
-        """The bus's emulated device vanishes the way real hardware does: a Sabertooth's pty
-        closes (the driver sees the cable pulled), the ODrive axes fall silent on the CAN
-        bus, a HAL-level sim board reports itself gone. The real hot-plug path notices."""
+        """The bus's emulated device vanishes the way real hardware does: a device behind a
+        pty has its pty closed (the driver sees the cable pulled), an emulator with `silence`
+        (the ODrive axes) falls silent on its bus, a HAL-level sim board reports itself gone.
+        The real hot-plug path notices."""
         if bus in self.sabertooth:
             self.sabertooth[bus].link.unplug()
-        elif bus in self.odrive:
-            self.odrive[bus].silence()
+        elif hasattr(self.emulated.get(bus), "silence"):
+            self.emulated[bus].silence()
         else:
-            self.world.unplug(bus)
+            self.signals.unplug(bus)
         self.unplugged.add(bus)
 
     def plug(self, bus: str) -> None:
@@ -294,10 +182,10 @@ class SimBackplane:
             link = self.sabertooth[bus].link
             if not link.plugged:
                 link.replug()
-        elif bus in self.odrive:
-            self.odrive[bus].resume()
+        elif hasattr(self.emulated.get(bus), "resume"):
+            self.emulated[bus].resume()
         else:
-            self.world.replug(bus)
+            self.signals.replug(bus)
         self.unplugged.discard(bus)
 
     def tick(self, now: float, dt: float) -> None:
@@ -317,7 +205,7 @@ class SimBackplane:
             service(now)
         self._physics_dt += dt
         if self.physics_hz is None or self._physics_dt * self.physics_hz >= 1.0 - 1e-6:
-            self.world.step(self._physics_dt)
+            self.signals.step(self._physics_dt)
             self._physics_dt = 0.0
 
     def _watch_ptys(self) -> None:

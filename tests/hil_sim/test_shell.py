@@ -229,6 +229,18 @@ def test_c_error_response_exits_1_and_raw_prints_the_line(server: str) -> None:
     assert raw.stdout.startswith("base:lf_wheel.error=(bad_params,vel takes")
 
 
+def test_c_a_request_refused_by_an_interlock_says_which_are_active(server: str) -> None:
+    """MARTE's shipped chain_needs_ladder_down: the bin raised (the pot says 0.8)."""
+    assert run_c(server, "-c", "sim:input.set=(ble,lift_pot,0.8)").returncode == 0
+    try:
+        proc = run_c(server, "-c", "ble:chain.vel=(30)")
+        assert proc.returncode == 1
+        assert "interlocked: chain_needs_ladder_down is active" in proc.stdout
+        assert "active interlocks: chain_needs_ladder_down, bin_up_slow (" in proc.stdout
+    finally:
+        assert run_c(server, "-c", "sim:input.clear=(ble,lift_pot)").returncode == 0
+
+
 def test_c_closed_port_exits_2() -> None:
     port = free_port()
     proc = run_c(f"127.0.0.1:{port}", "-c", "base:base.get=()")

@@ -8,8 +8,8 @@ import pytest
 
 from ramp.autonomy.config import GimbalConfig, ServoConfig
 from ramp.autonomy.hal import driver_class
-from ramp.autonomy.hal.phidget_common import RETRY_S
 from ramp.autonomy.hal.phidget_servo import PhidgetPanTilt
+from ramp.common.phidget22 import RETRY_S
 from ramp.errors import DeviceError
 from tests.fake_phidget22 import (
     EPHIDGET_NOTATTACHED,
@@ -186,7 +186,8 @@ def test_close_closes_both_channels_once(lib: FakeLibrary) -> None:
 
 def test_without_phidget22_opening_says_how_to_install_it(monkeypatch: pytest.MonkeyPatch
                                                            ) -> None:
-    monkeypatch.setitem(sys.modules, "Phidget22", None)
+    for name in [m for m in sys.modules if m.split(".")[0] == "Phidget22"] + ["Phidget22"]:
+        monkeypatch.setitem(sys.modules, name, None)  # the real package is installed
     g = PhidgetPanTilt(GimbalConfig(pan=PAN, tilt=TILT))
     with pytest.raises(DeviceError, match=r"pip install 'ramp\[phidget\]'"):
         g.open(0.0)

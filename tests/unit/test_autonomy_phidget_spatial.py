@@ -177,7 +177,8 @@ def test_close_closes_the_channel_once_and_late_events_are_ignored(lib: FakeLibr
 
 def test_without_phidget22_opening_says_how_to_install_it(monkeypatch: pytest.MonkeyPatch
                                                            ) -> None:
-    monkeypatch.setitem(sys.modules, "Phidget22", None)
+    for name in [m for m in sys.modules if m.split(".")[0] == "Phidget22"] + ["Phidget22"]:
+        monkeypatch.setitem(sys.modules, name, None)  # the real package is installed
     imu = PhidgetImu(ImuConfig())
     with pytest.raises(DeviceError) as info:
         imu.open(0.0)

@@ -120,6 +120,24 @@ def test_an_operator_takeover_is_seen_as_operator_and_stops_odometry(bench: Benc
     op.stop()
 
 
+def test_a_refusal_by_an_interlock_is_handled_like_not_owner_naming_the_rule(
+        bench: Bench) -> None:
+    """MARTE's shipped chain_needs_ladder_down: the chain is refused with the bin up."""
+    robot = bench.robot
+    bench.world.lift_pos = 0.8
+    bench.run(0.1)
+    robot.begin()
+    robot.moving = True
+    robot.send("ble:chain.vel=(100)")
+    bench.run(0.1)
+    problem = robot.problem()
+    assert problem is not None and problem.kind is StatusKind.OPERATOR
+    assert problem.reason.startswith("interlocked: chain_needs_ladder_down is active")
+    assert "ble:chain.vel=(100)" in problem.reason
+    assert not robot.moving  # it stops meaning to move, as after not_owner
+    assert bench.world.duty("ble.chain_left") == 0.0
+
+
 def test_a_watchdog_trip_while_moving_is_reported_once(bench: Bench) -> None:
     robot = bench.robot
     robot.begin()

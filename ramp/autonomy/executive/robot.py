@@ -11,8 +11,10 @@ Everything the activities send to the robot goes through here, so three rules ho
   silent and the robot stops.
 - **Every error answer is kept**, stamped with the activity it belongs to (`begin()` opens a
   new one), so an activity sees only its own: `problem()` turns the first into a `Status`
-  (`not_owner` -> operator, anything else -> fault). Answers to an earlier activity's
-  commands are logged, not blamed on the next.
+  (`not_owner` and `interlocked` -> operator, anything else -> fault). Answers to an
+  earlier activity's commands are logged, not blamed on the next. A refusal by an interlock
+  (`interlocked`, SPEC 11) is handled like `not_owner`: the executive stops meaning to move
+  (the rule stopped what ran there) and says which rule refused what.
 - **Odometry hears every drive and every stop** the executive sends, so dead reckoning
   matches what the wheels were told.
 
@@ -234,5 +236,9 @@ class RobotLink:
             self._errors.append((gen, code, detail, request))
             ok = False
             if code == "not_owner":
+                self.motion_stopped_by_others()
+            elif code == "interlocked":
+                log.warning("robot link: %s refused by interlock %s", request,
+                            detail.split(" ", 1)[0] or "?")
                 self.motion_stopped_by_others()
         return ok

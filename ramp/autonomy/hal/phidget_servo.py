@@ -24,8 +24,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from ramp.autonomy.config import GimbalConfig, ServoConfig
-from ramp.autonomy.hal import phidget_common as pc
 from ramp.autonomy.hal.interfaces import PanTilt, Servo
+from ramp.common import phidget22 as pc
 from ramp.errors import DeviceError
 
 log = logging.getLogger(__name__)
@@ -110,7 +110,10 @@ class PhidgetPanTilt(PanTilt):
     # -- lifecycle --------------------------------------------------------------------------
     def _open(self, now: float) -> None:
         if self._api is None:
-            self._api = pc.import_phidget22(self.name, load_phidget22)
+            try:
+                self._api = pc.import_phidget22(load_phidget22)
+            except pc.PhidgetUnavailable as exc:
+                raise DeviceError(self.name, str(exc)) from exc.__cause__
         api = self._api
         q: queue.SimpleQueue[pc.Event] = queue.SimpleQueue()
         self._queue = q
@@ -119,14 +122,14 @@ class PhidgetPanTilt(PanTilt):
                 axis.attached = False
                 axis.position_deg = None
                 axis.sent = {}
-                axis.handle = ch = pc.construct(self.name, api.RCServo)
+                axis.handle = ch = pc.construct(api.RCServo)
                 pc.match(ch, self.config.serial, self.config.hub_port, axis.config.channel)
                 pc.common_handlers(ch, q, idx)
                 self._motion_handlers(ch, q, idx)
                 ch.open()  # returns at once; the attach comes as an event
-        except DeviceError:
+        except pc.PhidgetUnavailable as exc:
             self._close()
-            raise
+            raise DeviceError(self.name, str(exc)) from exc.__cause__
         except api.PhidgetException as exc:
             self._close()
             raise DeviceError(self.name, f"cannot open the {self.where()}: "
@@ -183,11 +186,7 @@ class PhidgetPanTilt(PanTilt):
         cfg = axis.config
         lo, hi = sorted((axis.to_units(cfg.min_deg), axis.to_units(cfg.max_deg)))
         try:
-            ch.setMinPulseWidth(cfg.neutral_us + cfg.us_per_deg * lo)
-            ch.setMaxPulseWidth(cfg.neutral_us + cfg.us_per_deg * hi)
-            ch.setMinPosition(lo)
-            ch.setMaxPosition(hi)
-            ch.setSpeedRampingState(True)
+            pc.set_servo_range(ch, cfg.neutral_us, cfg.us_per_deg, lo, hi)
             ch.setDataInterval(pc.clamp_interval(ch, POSITION_INTERVAL_MS, axis.label))
         except api.PhidgetException as exc:
             self._set_fault(DeviceError(self.name, f"cannot configure {self.where()} "
@@ -250,21 +249,16 @@ class PhidgetPanTilt(PanTilt):
                         pc.describe(exc))
 
     def _send_target(self, axis: PhidgetServo, units: float) -> None:
-        ch = axis.handle
-        set_async = getattr(ch, "setTargetPosition_async", None)
-        if set_async is None:
-            ch.setTargetPosition(units)
-            axis.sent["target"] = units
-            axis.has_target = True
-            return
         q = self._queue
         idx = self.axes.index(axis)
 
-        def on_done(_ch: Any, code: Any, _details: Any = "") -> None:
-            q.put(("written", idx, (units, int(code))))  # library thread: enqueue only
+        def on_done(code: int) -> None:
+            q.put(("written", idx, (units, code)))  # library thread: enqueue only
 
-        set_async(units, on_done)
-        axis.sent["target"] = units  # in flight; a failure event clears it for a retry
+        sent_async = pc.send_target(axis.handle, units, on_done)  # raises when refused
+        axis.sent["target"] = units  # when async: in flight; a failure event clears it
+        if not sent_async:
+            axis.has_target = True
 
 
 def _clamp(value: float, lo: Any, hi: Any) -> float:

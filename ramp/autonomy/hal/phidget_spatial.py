@@ -22,8 +22,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from ramp.autonomy.config import ImuConfig
-from ramp.autonomy.hal import phidget_common as pc
 from ramp.autonomy.hal.interfaces import Imu, ImuSample, Vec3
+from ramp.common import phidget22 as pc
 from ramp.errors import DeviceError
 
 log = logging.getLogger(__name__)
@@ -66,7 +66,10 @@ class PhidgetImu(Imu):
     # -- lifecycle --------------------------------------------------------------------------
     def _open(self, now: float) -> None:
         if self._api is None:
-            self._api = pc.import_phidget22(self.name, load_phidget22)
+            try:
+                self._api = pc.import_phidget22(load_phidget22)
+            except pc.PhidgetUnavailable as exc:
+                raise DeviceError(self.name, str(exc)) from exc.__cause__
         api = self._api
         # A fresh queue per open: late events from a previous handle land in the old one.
         q: queue.SimpleQueue[pc.Event] = queue.SimpleQueue()
@@ -74,7 +77,10 @@ class PhidgetImu(Imu):
         self._anchor = None
         self._last_ms = None
         self._attached = False
-        ch = pc.construct(self.name, api.Spatial)
+        try:
+            ch = pc.construct(api.Spatial)
+        except pc.PhidgetUnavailable as exc:
+            raise DeviceError(self.name, str(exc)) from exc.__cause__
         try:
             pc.match(ch, self.config.serial, self.config.hub_port, self.config.channel)
             pc.common_handlers(ch, q, None)

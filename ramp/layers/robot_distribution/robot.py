@@ -3,7 +3,8 @@
 Module state, control ownership and the watchdog live here because they concern the whole
 robot; each module's own table (the module distribution layer) does the device, function and
 parameter checks. Checks run in the SPEC's order: module known, module state, device and
-function, parameters, ownership.
+function, parameters, ownership, interlocks (`interlocks.Interlocks`, SPEC 11: its own file,
+asked once per motion request and run as its own scheduler task).
 
 The server hands each message down as a `RequestContext` (client, time): `message(ctx)` once
 (its sender has been heard: what the watchdog asks of each commander), then
@@ -29,6 +30,7 @@ from ramp.layers.module_distribution import Function, Module
 from ramp.layers.module_distribution.router import Version, answer
 from ramp.layers.robot_distribution.context import Client, RequestContext
 from ramp.layers.robot_distribution.control import Control
+from ramp.layers.robot_distribution.interlocks import Interlocks
 from ramp.layers.robot_distribution.registry import ModuleRegistry, ModuleSlot
 from ramp.layers.robot_distribution.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S, Watchdog
 from ramp.mcp.messages import Request, Response, Value, error_response
@@ -84,6 +86,9 @@ class RobotRequests(Module):
                           takes_context=True))
         self.add(Function("control", "release", (), layer.release, "state",
                           "give control up", takes_context=True))
+        self.add(Function("interlock", "reset", (NameParam(),), layer.interlock_reset, "state",
+                          "clear a latched interlock once its condition has cleared",
+                          takes_context=True))
         # The answer depends on the asking client (its own watchdog timeout) and the uptime
         # moves: built for each request, never cached.
         self.add(Function("robot", "get", (), layer.health_rows_for, "read",
@@ -97,10 +102,13 @@ class RobotRequests(Module):
                    ("tick", "late", "int", "us"), ("tick", "overruns", "int", ""),
                    ("watchdog", "timeout", "float", "s"), ("watchdog", "state", "name", ""),
                    ("watchdog", "commanders", "int", ""),
-                   ("control", "owner", "name", ""), ("clients", "count", "int", ""))
+                   ("control", "owner", "name", ""), ("clients", "count", "int", ""),
+                   ("interlock", "active", "name", ""))
 
     def describe(self) -> list[Response]:
         out = [Response("robot", "robot", "module", (name,)) for name in self.layer.slots]
+        out.extend(Response("robot", "interlock", "rule", (rule.name,))
+                   for rule in self.layer.interlocks.rules)
         for fn in self.functions.values():
             out.append(Response("robot", fn.device, "function",
                                 (fn.name, *(p.describe() for p in fn.params))))
@@ -128,7 +136,8 @@ class RobotDistribution:
     """Routes each request of a message and applies watchdog and arbitration rules."""
 
     def __init__(self, registry: ModuleRegistry, watchdog: Watchdog,
-                 health: Callable[[], Health], ticks: TickCount | None = None) -> None:
+                 health: Callable[[], Health], ticks: TickCount | None = None,
+                 interlocks: Interlocks | None = None) -> None:
         self.registry = registry
         self.slots: dict[str, ModuleSlot] = registry.slots
         self.watchdog = watchdog
@@ -138,6 +147,9 @@ class RobotDistribution:
         self._ticks = ticks if ticks is not None else _NoTicks()
         #: State changes made outside a tick (see the module docstring).
         self.changes = 0
+        #: The rules of `interlocks:` bound to the modules (none: nothing is guarded).
+        self.interlocks = interlocks if interlocks is not None else Interlocks((), self.slots)
+        self.interlocks.on_motion_changed = self._interlock_acted
         self.robot = RobotRequests(self)
         #: Modules outside the registry (the simulator's `sim`): routed like any module, but
         #: they use no bus, are never attached or faulted, and `robot.modules`, `robot.get`
@@ -186,6 +198,11 @@ class RobotDistribution:
             return answer(fn.run(ctx, *values) if fn.takes_context else fn.run(*values))
         if (kind == "motion" or kind == "state") and not self.control.may_command(ctx.client):
             return _error(req, "not_owner", f"control is held by {self.control.owner_name}")
+        interlocks = self.interlocks
+        if kind == "motion" and interlocks.guards:
+            refusal = interlocks.permit(module, fn, values, ctx.now)
+            if refusal is not None:
+                return _error(req, "interlocked", refusal)
         self.changes += 1
         try:
             result = fn.run(ctx, *values) if fn.takes_context else fn.run(*values)
@@ -196,6 +213,8 @@ class RobotDistribution:
             if kind == "motion":  # it may have started some motors with the watchdog idle
                 self._stop(target, "a failed motion request")
             return _error(req, "fault", f"internal error {type(exc).__name__}")
+        if interlocks.rules and (kind == "motion" or kind == "stop"):
+            interlocks.ran(module, fn, values)
         if kind == "motion":
             self.watchdog.command(module, ctx.client, ctx.now, self.any_moving())
         elif kind == "stop" and not self.any_moving():
@@ -247,6 +266,24 @@ class RobotDistribution:
             log.info("control released by %s (%s)", self.control.owner_name, client.peer)
             self.control.release(client)
             self._control_changed(client, ctx.now)
+
+    def interlock_reset(self, ctx: RequestContext, name: str) -> None:
+        """`robot:interlock.reset=(NAME)`: a latched rule whose condition has cleared is
+        released; refused (`interlocked`) while it still holds."""
+        interlocks = self.interlocks
+        if name not in interlocks.by_name:
+            known = " ".join(interlocks.by_name) or "none configured"
+            raise RequestError("bad_params", f"no interlock {name}; rules: {known}")
+        refusal = interlocks.reset(name, ctx.now)
+        if refusal is not None:
+            raise RequestError("interlocked", refusal)
+
+    def _interlock_acted(self, now: float) -> None:
+        """An interlock stopped or slowed motion: the state's version moves, and a watchdog
+        left guarding nothing goes idle."""
+        self.changes += 1
+        if not self.any_moving():
+            self.watchdog.disarm(now)
 
     def _control_changed(self, client: Client, now: float) -> None:
         if self.on_control is not None:
@@ -347,6 +384,8 @@ class RobotDistribution:
             Response("robot", "control", "owner", (self.control.owner_name,)),
             Response("robot", "clients", "count", (h.clients,)),
         ]
+        active = self.interlocks.active_names()
+        rows.append(Response("robot", "interlock", "active", active or ("none",)))
         rows.extend(Response("robot", name, "state", (slot.state,))
                     for name, slot in self.slots.items())
         if h.recorder_dropped is not None:

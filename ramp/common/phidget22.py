@@ -1,4 +1,5 @@
-"""What the autonomy's two Phidget22 drivers (Spatial, RCServo) share.
+"""The one Phidget22 adapter: what every driver on the vendor's package shares (the backend's
+`phidget` bus, the autonomy's Spatial IMU and RCServo gimbal).
 
 Phidget22 is callback-driven: libphidget22 attaches channels and delivers data on its own
 threads. Those threads must never touch the autonomy's state, so every handler does one thing,
@@ -19,9 +20,7 @@ import queue
 from collections.abc import Callable
 from typing import Any
 
-from ramp.errors import DeviceError
-
-log = logging.getLogger("ramp.autonomy.hal.phidget")
+log = logging.getLogger("ramp.phidget22")
 
 INSTALL_HINT = "install it with: pip install 'ramp[phidget]' and apt-get install libusb-1.0-0"
 
@@ -34,27 +33,33 @@ RETRY_S = 0.1
 Event = tuple[str, Any, Any]  # (event, which channel, payload)
 
 
-def import_phidget22(name: str, load: Callable[[], Any]) -> Any:
-    """Run `load` (which imports Phidget22 classes); turn a missing package or native library
-    into a DeviceError naming the device and saying how to install it."""
+class PhidgetUnavailable(Exception):
+    """The Phidget22 package or its native library cannot be loaded; the text says how to
+    install it. Callers turn it into their own device error (`DeviceError(name, str(exc))`),
+    since this leaf imports nothing of RAMP."""
+
+
+def import_phidget22(load: Callable[[], Any]) -> Any:
+    """Run `load` (which imports Phidget22 classes); a missing package or native library is
+    PhidgetUnavailable (its cause the ImportError or OSError)."""
     try:
         return load()
     except ImportError as exc:
-        raise DeviceError(name, f"the Phidget22 package is not installed; {INSTALL_HINT}"
-                          ) from exc
+        raise PhidgetUnavailable(f"the Phidget22 package is not installed; {INSTALL_HINT}"
+                                 ) from exc
     except OSError as exc:
-        raise DeviceError(name, f"the Phidget22 native library cannot be loaded: {exc}; "
-                          f"{INSTALL_HINT}") from exc
+        raise PhidgetUnavailable(f"the Phidget22 native library cannot be loaded: {exc}; "
+                                 f"{INSTALL_HINT}") from exc
 
 
-def construct(name: str, cls: Callable[[], Any]) -> Any:
+def construct(cls: Callable[[], Any]) -> Any:
     """A Phidget22 channel object. Constructors load libphidget22 (which needs libusb-1.0);
-    when that fails the error says so."""
+    when that fails it is PhidgetUnavailable."""
     try:
         return cls()
     except OSError as exc:
-        raise DeviceError(name, f"the Phidget22 native library cannot be loaded: {exc}; "
-                          f"{INSTALL_HINT}") from exc
+        raise PhidgetUnavailable(f"the Phidget22 native library cannot be loaded: {exc}; "
+                                 f"{INSTALL_HINT}") from exc
 
 
 def match(ch: Any, serial: int, hub_port: int, channel: int) -> None:
@@ -116,3 +121,30 @@ def clamp_interval(ch: Any, ms: int, what: str) -> int:
     if clamped != ms:
         log.info("%s: data interval %d ms clamped to %d ms", what, ms, clamped)
     return clamped
+
+
+def set_servo_range(ch: Any, neutral_us: float, us_per_deg: float, lo: float, hi: float) -> None:
+    """Map an attached RCServo's positions onto pulses so that one position unit is one
+    degree (`neutral_us` at 0, `us_per_deg` per degree) between `lo` and `hi` (units, lo <
+    hi), and let the controller ramp its speed (velocity limit and acceleration apply)."""
+    ch.setMinPulseWidth(neutral_us + us_per_deg * lo)
+    ch.setMaxPulseWidth(neutral_us + us_per_deg * hi)
+    ch.setMinPosition(lo)
+    ch.setMaxPosition(hi)
+    ch.setSpeedRampingState(True)
+
+
+def send_target(ch: Any, units: float, on_done: Callable[[int], None]) -> bool:
+    """Hand an RCServo its target without waiting for the USB round trip when the library
+    can (`setTargetPosition_async`; `on_done(code)` then runs on a library thread: queue
+    only). False: it was set synchronously and is in place now."""
+    set_async = getattr(ch, "setTargetPosition_async", None)
+    if set_async is None:
+        ch.setTargetPosition(units)
+        return False
+
+    def done(_ch: Any, code: Any, _details: Any = "") -> None:
+        on_done(int(code))
+
+    set_async(units, done)
+    return True

@@ -1,0 +1,1 @@
+"""ramp-arm: a 3-joint arm with a gripper as a RAMP plugin (module type `arm`)."""

@@ -1,0 +1,150 @@
+"""The RMC arena as a part of MARTE's simulated world: the floor the chassis stands on.
+
+Walls, rocks, craters and the terrain's undulation (`firmware_like.terrain`), and the
+referee's counts (SPEC 6.1: collisions and crater entries begun, a wheel trapped in a crater).
+The chassis (`firmware_like.marte.MarteWorld`) moves itself and, in each of its physics pieces,
+asks its floor to stop it at a wall or a rock (`clamp`, `push_off_rocks`), to count what it
+touches (`update_contacts`) and to rest it on the ground (`rest`: height, pitch, roll, and
+the traction a crater leaves it). Every floating point operation is the one MARTE's single
+model made, in the same order, so a seeded run gives the same result to the last bit.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from firmware_like.arena import Layout, collector_span, disc_overlap
+from firmware_like.arena_params import ArenaParams
+from firmware_like.marte_params import MarteParams
+from firmware_like.terrain import Terrain
+
+
+class ArenaFloor:
+    """The arena a chassis of `params`' footprint drives in; `layout` None is an empty arena
+    with level ground."""
+
+    def __init__(self, params: MarteParams, arena: ArenaParams, seed: int,
+                 layout: Layout | None) -> None:
+        p = self.params = params
+        self.arena = arena
+        self.layout = layout if layout is not None else Layout(source="empty arena")
+        self.terrain = Terrain(self.layout, self.arena, seed, flat=layout is None)
+        self.flat = layout is None
+        self.rocks = [(r.x, r.y, r.radius) for r in self.layout.rocks]
+        self.craters = [(c.x, c.y, c.radius) for c in self.layout.craters]
+        self.reach = math.hypot(p.robot_length, p.robot_width) / 2.0 + max(
+            [r for *_, r in self.rocks + self.craters] + [0.0])
+        self.collisions = 0
+        self.crater_entries = 0
+        self.collision_log: list[tuple[float, str]] = []
+        self.crater_log: list[tuple[float, str]] = []
+        self.trapped = False
+        #: What a crater leaves of the wheels' grip (1 on firm ground, 0 trapped).
+        self.traction = 1.0
+        self.touching: set[str] = set()
+
+    def clamp(self, body: Any) -> None:
+        """Walls stop the robot: push the footprint back inside, keeping its heading."""
+        p = self.params
+        corners = body.corners()
+        xs = [c[0] for c in corners]
+        ys = [c[1] for c in corners]
+        if min(xs) < 0.0:
+            body.x -= min(xs)
+        elif max(xs) > p.arena_length:
+            body.x -= max(xs) - p.arena_length
+        if min(ys) < 0.0:
+            body.y -= min(ys)
+        elif max(ys) > p.arena_width:
+            body.y -= max(ys) - p.arena_width
+
+    def push_off_rocks(self, body: Any) -> None:
+        """A rock stops the robot: a footprint deeper into a rock's disc than a wheel can ride
+        up its flank is pushed back out, keeping its heading (it slides along the rock)."""
+        p, ride = self.params, self.arena.rock_ride_up
+        moved = False
+        for cx, cy, r in self.rocks:
+            if (cx - body.x) ** 2 + (cy - body.y) ** 2 >= self.reach ** 2:
+                continue
+            depth, nx, ny = disc_overlap(body.x, body.y, body.heading, p.robot_length,
+                                         p.robot_width, cx, cy, r)
+            limit = min(ride, r)
+            if depth > limit:
+                body.x += nx * (depth - limit)
+                body.y += ny * (depth - limit)
+                moved = True
+        if moved:
+            self.clamp(body)
+
+    def contacts(self, body: Any) -> tuple[set[str], set[str]]:
+        """(what the footprint collides with, craters it overlaps) now, by SPEC 6.1."""
+        p, a = self.params, self.arena
+        eps = a.contact_epsilon
+        corners = body.corners()
+        hits: set[str] = set()
+        at_x0 = [i for i, c in enumerate(corners) if c[0] <= eps]
+        if at_x0:
+            lo, hi = collector_span(p)
+            docking = (all(i >= 2 for i in at_x0)  # only rear corners touch
+                       and min(c[0] for c in corners) >= -a.docking_tolerance
+                       and all(lo <= corners[i][1] <= hi for i in at_x0))
+            if not docking:
+                hits.add("wall x=0")
+        if any(c[0] >= p.arena_length - eps for c in corners):
+            hits.add(f"wall x={p.arena_length:g}")
+        if any(c[1] <= eps for c in corners):
+            hits.add("wall y=0")
+        if any(c[1] >= p.arena_width - eps for c in corners):
+            hits.add(f"wall y={p.arena_width:g}")
+        craters: set[str] = set()
+        for kind, discs, out in (("rock", self.rocks, hits), ("crater", self.craters,
+                                                                craters)):
+            for i, (cx, cy, r) in enumerate(discs):
+                if (cx - body.x) ** 2 + (cy - body.y) ** 2 >= self.reach ** 2:
+                    continue
+                depth, _, _ = disc_overlap(body.x, body.y, body.heading, p.robot_length,
+                                           p.robot_width, cx, cy, r)
+                if depth > 0.0:
+                    out.add(f"{kind} {i}")
+        return hits, craters
+
+    def update_contacts(self, body: Any, count: bool) -> None:
+        """Count each collision and crater entry once, when it begins."""
+        hits, craters = self.contacts(body)
+        now = hits | craters
+        if count:
+            for what in sorted(hits - self.touching):
+                self.collisions += 1
+                self.collision_log.append((body.time, what))
+            for what in sorted(craters - self.touching):
+                self.crater_entries += 1
+                self.crater_log.append((body.time, what))
+        self.touching = now
+
+    def rest(self, body: Any) -> None:
+        """Rest the chassis on its four wheels: height, pitch and roll from where each wheel
+        touches the terrain; the deepest wheel in a crater sets the traction."""
+        if self.flat:
+            return
+        p, a = self.params, self.arena
+        c, s = math.cos(body.heading), math.sin(body.heading)
+        hb, ht = p.wheelbase / 2.0, p.track_width / 2.0
+        radius, half_w = p.wheel_diameter / 2.0, p.wheel_width / 2.0
+        z: list[float] = []
+        sink = 0.0
+        for f, lft in ((hb, ht), (hb, -ht), (-hb, ht), (-hb, -ht)):
+            wx, wy = body.x + f * c - lft * s, body.y + f * s + lft * c
+            h, ground = self.terrain.wheel_contact(wx, wy, c, s, radius, half_w)
+            z.append(h)
+            sink = max(sink, ground - h)
+        fl, fr, rl, rr = z
+        body.z = (fl + fr + rl + rr) / 4.0
+        body.pitch = math.asin(max(-1.0, min(1.0, ((rl + rr) - (fl + fr)) / (2.0 * p.wheelbase))))
+        across = 2.0 * p.track_width * math.cos(body.pitch)
+        body.roll = math.asin(max(-1.0, min(1.0, ((fl + rl) - (fr + rr)) / across)))
+        self.trapped = sink >= a.crater_trap_sink
+        if self.trapped:
+            self.traction = 0.0
+        else:
+            self.traction = 1.0 - (1.0 - a.crater_slow_min) * max(0.0, sink) / a.crater_trap_sink

@@ -1,0 +1,177 @@
+"""The simulated world as parts: a chassis, each payload, the floor or arena.
+
+`ramp run --sim` builds one `World` per robot from the `ramp.emulators` entry points
+(`ramp.simulation.backplane`): each module type's emulator (`module.TYPE`) is a *part* that
+owns that module's signals (`module.device`, the YAML names) and its physics, and parts that
+share state (a payload that needs the chassis' pose, two modules of one coupled model) reach
+each other through `EmulatorContext.shared`. The world routes every signal to the first part
+that knows it (a part raises KeyError for names it does not own); a signal no part knows is
+simulated plainly (commands remembered, inputs read 0), so a new robot's wiring runs under
+--sim before it has physics. `step(dt)` steps the parts in the order they were added, which
+is the config's module order.
+
+A part is any object with the methods of `ramp.hal.simio.SimWorld` it needs (`set_motor`,
+`read_analog`, `read_digital`, `write_digital`, `read_bridge`, `set_servo`, `read_servo`),
+`step(dt)`, and optionally `revision` (an int that moves on when its readings may change) and
+`bus_present(bus)`.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+log = logging.getLogger("ramp.sim")
+
+
+class PlainSignals:
+    """The signals no part owns: commands are remembered, inputs read zero."""
+
+    def __init__(self) -> None:
+        self.motors: dict[str, float] = {}
+        self.outputs: dict[str, bool] = {}
+        self.servos: dict[str, float] = {}
+
+    def set_motor(self, name: str, duty: float) -> None:
+        self.motors[name] = duty
+
+    def read_analog(self, name: str) -> float:
+        return 0.0
+
+    def read_digital(self, name: str) -> bool:
+        return False
+
+    def write_digital(self, name: str, on: bool) -> None:
+        self.outputs[name] = on
+
+    def read_bridge(self, name: str) -> float:
+        return 0.0
+
+    def set_servo(self, name: str, target_deg: float | None, speed_dps: float) -> None:
+        if target_deg is not None:
+            self.servos[name] = target_deg  # an ideal servo: there at once
+
+    def read_servo(self, name: str) -> float:
+        return self.servos.get(name, 0.0)
+
+
+class World:
+    """Parts that own signals, stepped together; what the sim buses and emulators drive."""
+
+    def __init__(self, parts: list[Any] | None = None) -> None:
+        self.parts: list[Any] = []
+        self.plain = PlainSignals()
+        self._owner: dict[str, Any] = {}
+        self._unplugged: set[str] = set()
+        self._own_revision = 0
+        #: Inputs the `sim` module holds at a value (`sim:input.set`): name -> quantity.
+        self.overrides: dict[str, float] = {}
+        for part in parts or []:
+            self.add(part)
+
+    def add(self, part: Any) -> None:
+        """Add a part (once: a part shared by two modules is stepped once)."""
+        if not any(p is part for p in self.parts):
+            self.parts.append(part)
+
+    def _route(self, method: str, name: str, *args: Any) -> Any:
+        owner = self._owner.get(name)
+        if owner is not None:
+            return getattr(owner, method)(name, *args)
+        for part in self.parts:
+            fn = getattr(part, method, None)
+            if fn is None:
+                continue
+            try:
+                out = fn(name, *args)
+            except KeyError:
+                continue
+            self._owner[name] = part
+            return out
+        self._owner[name] = self.plain
+        log.info("sim: %s is not a signal of any physics part; it is simulated plainly "
+                 "(commands recorded, inputs read 0)", name)
+        return getattr(self.plain, method)(name, *args)
+
+    # -- the SimWorld protocol (ramp.hal.simio) ---------------------------------------------
+    def set_motor(self, name: str, duty: float) -> None:
+        self._route("set_motor", name, duty)
+
+    def read_analog(self, name: str) -> float:
+        if name in self.overrides:
+            return float(self._overridden(name))
+        return float(self._route("read_analog", name))
+
+    def read_digital(self, name: str) -> bool:
+        if name in self.overrides:
+            return bool(self._overridden(name))
+        return bool(self._route("read_digital", name))
+
+    def write_digital(self, name: str, on: bool) -> None:
+        self._route("write_digital", name, on)
+
+    def read_bridge(self, name: str) -> float:
+        if name in self.overrides:
+            return float(self._overridden(name))
+        return float(self._route("read_bridge", name))
+
+    def set_servo(self, name: str, target_deg: float | None, speed_dps: float) -> None:
+        self._route("set_servo", name, target_deg, speed_dps)
+
+    def read_servo(self, name: str) -> float:
+        return float(self._route("read_servo", name))
+
+    def bus_present(self, bus: str) -> bool:
+        if bus in self._unplugged:
+            return False
+        return all(p.bus_present(bus) for p in self.parts if hasattr(p, "bus_present"))
+
+    @property
+    def revision(self) -> int:
+        """Moves on whenever any part's readings may have changed."""
+        return self._own_revision + sum(int(getattr(p, "revision", 0)) for p in self.parts)
+
+    # -- the `sim` module's hooks (SPEC 12) -------------------------------------------------
+    def set_input(self, name: str, quantity: float) -> None:
+        """Input `name` reads as if it sensed `quantity` until `clear_input`."""
+        self.overrides[name] = quantity
+        self._own_revision += 1
+
+    def clear_input(self, name: str) -> None:
+        if self.overrides.pop(name, None) is not None:
+            self._own_revision += 1
+
+    def _overridden(self, name: str) -> float | bool:
+        """An overridden input's reading: through its part's sensor model (`sensor_reading`:
+        a battery's rail volts become pin volts) where the part has one, else the value."""
+        quantity = self.overrides[name]
+        for part in self.parts:
+            reading = getattr(part, "sensor_reading", None)
+            if reading is None:
+                continue
+            try:
+                out: float | bool = reading(name, quantity)
+            except KeyError:
+                continue
+            return out
+        return quantity
+
+    # -- controls ---------------------------------------------------------------------------
+    def unplug(self, bus: str) -> None:
+        """A bus's device vanishes (a pulled cable)."""
+        self._unplugged.add(bus)
+        self._own_revision += 1
+
+    def replug(self, bus: str) -> None:
+        self._unplugged.discard(bus)
+        for p in self.parts:
+            if hasattr(p, "replug"):
+                p.replug(bus)
+        self._own_revision += 1
+
+    def step(self, dt: float) -> None:
+        for part in self.parts:
+            step = getattr(part, "step", None)
+            if step is not None:  # a payload its chassis carries is stepped by the chassis
+                step(dt)
+        self._own_revision += 1  # a part with no revision of its own is sampled every step

@@ -1,0 +1,514 @@
+"""Interlocks (SPEC 11): one module's state restricting another's motion, declared as data.
+
+A rule is a condition over get properties (`ramp.layers.robot_distribution.condition`) and one
+action on motion functions named by patterns (`MODULE:DEVICE.FUNCTION`, `*` within a name):
+
+- `refuse`: matching motion requests answer `interlocked`; the matching devices stop when the
+  rule becomes active (a permit checked at the start of a command, PLC practice);
+- `stop`: the same, said as what it is for (a protect: stop now, no new motion);
+- `limit N`: the speed of matching motion (a function's first parameter, an int in %) is
+  clamped to +-N, and motion already faster is brought down each tick. A matching motion
+  function without a speed (`lift.pos`, `lift.extend`) is refused while the limit holds: it
+  would run at a speed the rule forbids. `ramp.config` refuses a limit pattern that names
+  only such functions.
+
+**When rules are evaluated.** Every tick, after the buses sampled their inputs and before any
+module's own work (`tick`), and again for the rules guarding a motion request as it arrives
+(`permit`), since a request earlier in the same message may have changed a reading. The
+cost is one read per property the rules use (once, however many rules read it) and one
+closure call per comparison, and nothing more for a rule that does not hold: it grows with
+the rules and nothing else. The reads are the modules' own get properties (`Property.read`),
+the values a get answer is formatted from, never a formatted answer.
+
+**Release.** A rule becomes active in the tick (or request) its condition is seen true, and
+is released once the condition has been clear for `RELEASE_AFTER_S` (0.1 s): a reading that
+hovers at its threshold keeps the rule active instead of switching it 100 times a second
+(each switch logged, recorded, and stopping devices). Being active longer is the safe side.
+
+**Fail closed.** A rule whose property cannot be read (its module not `ok`, a reading MCP
+cannot carry, a reader that raised) counts as active. A latching rule latches only on its
+condition seen true: a module that is still attaching at boot, or is unplugged, holds its
+rules active while it is unreadable, and they release once it reads clear again.
+
+**Stopping a device** is the device's own speed function at 0 (`lift.vel=(0)` cancels a
+position move too; `base.drive=(0,...)` stops every wheel), or, for a device with no speed
+function, its module's `stop()`: the only stop every module has. Stops are never refused,
+and neither is a speed function asked for 0 (`ble:chain.vel=(0)`), which is one.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import logging
+import math
+import re
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from ramp.layers.module_distribution import Function, Module, Property
+from ramp.layers.robot_distribution.condition import Node, compile_condition, properties
+from ramp.mcp.params import FlagParam, FloatParam, IntParam, Param
+
+log = logging.getLogger("ramp.interlock")
+
+Action = Literal["refuse", "stop", "limit"]
+ACTIONS: tuple[Action, ...] = ("refuse", "stop", "limit")
+#: A rule's name: what `robot:interlock.reset=(NAME)` and the error answers carry.
+RULE_NAME = re.compile(r"[A-Za-z0-9_-]{1,32}\Z")
+#: `MODULE:DEVICE.FUNCTION`, or `MODULE:*` for every motion function of a module.
+PATTERN = re.compile(
+    r"([A-Za-z0-9_*]{1,32}):(?:([A-Za-z0-9_*]{1,32})\.([A-Za-z0-9_*]{1,32})|\*)\Z")
+PROPERTY = re.compile(r"([A-Za-z0-9_]{1,32}):([A-Za-z0-9_]{1,32})\.([A-Za-z0-9_]{1,32})\Z")
+
+#: Observer hook: (rule name, active, why, clock time) at every activation and release.
+InterlockHook = Callable[[str, bool, str, float], None]
+
+
+@dataclass(frozen=True)
+class RuleSpec:
+    """One checked rule of `interlocks:` (made by `ramp.config`)."""
+
+    name: str
+    when: Node
+    action: Action
+    #: (pattern, N): N is the limit in % for `limit`, None for `refuse` and `stop`.
+    patterns: tuple[tuple[str, int | None], ...]
+    latch: bool = False
+    line: int = 0
+
+
+# -- what the tables offer (shared with the config check) -----------------------------------
+
+def speed_param(fn: Function) -> IntParam | None:
+    """The speed of a motion function: its first parameter when that is an int in % that
+    includes 0 (`vel=(int -100..100)`, `drive=(int -100..100,float)`); else None."""
+    if fn.kind != "motion" or not fn.params:
+        return None
+    p = fn.params[0]
+    if isinstance(p, IntParam) and -100 <= p.lo <= 0 <= p.hi <= 100 and p.lo < p.hi:
+        return p
+    return None
+
+
+def motion_matches(pattern: str, modules: Mapping[str, Module]) -> list[tuple[str, Function]]:
+    """Every (module name, motion function) the pattern names, in table order."""
+    m = PATTERN.match(pattern)
+    if m is None:
+        return []
+    mp, dp, fp = m.group(1), m.group(2) or "*", m.group(3) or "*"
+    out: list[tuple[str, Function]] = []
+    for name, module in modules.items():
+        if not fnmatch.fnmatchcase(name, mp):
+            continue
+        out.extend((name, fn) for fn in module.functions.values()
+                   if fn.kind == "motion" and fnmatch.fnmatchcase(fn.device, dp)
+                   and fnmatch.fnmatchcase(fn.name, fp))
+    return out
+
+
+def find_property(module: Module, device: str, name: str) -> Property | None:
+    for p in module.properties:
+        if p.device == device and p.name == name:
+            return p
+    return None
+
+
+def _neutral(p: Param) -> Any:
+    """A value of `p` that asks for no motion, for the parameters after a zero speed."""
+    if isinstance(p, IntParam):
+        return min(max(0, p.lo), p.hi)
+    if isinstance(p, FloatParam):
+        lo = -math.inf if p.lo is None else p.lo
+        hi = math.inf if p.hi is None else p.hi
+        return min(max(0.0, lo), hi)
+    if isinstance(p, FlagParam):
+        return 0
+    raise ValueError(f"no neutral value for {p.describe()}")
+
+
+# -- the running rules ----------------------------------------------------------------------
+
+#: What a guard does to a request while its rule is active: refuse it, refuse it unless its
+#: speed is 0 (a stop), or clamp its speed.
+REFUSE, ZERO_ONLY, LIMIT = 0, 1, 2
+#: A rule is released once its condition has been clear this long (s): ten ticks at 100 Hz.
+RELEASE_AFTER_S = 0.1
+#: `Rule.evaluate`'s answers besides an unreadable property's index.
+HOLDS, CLEAR = -1, -2
+#: What a refusal says of a latched rule whose condition has cleared.
+LATCHED = "is latched until robot:interlock.reset"
+
+
+@dataclass
+class _Limit:
+    """One speed function a limit rule holds to +-n."""
+
+    slot: Any  # ModuleSlot (not imported: the registry imports this layer's siblings)
+    fn: Function
+    lo: int
+    hi: int
+    #: The device's get row of the same name (`lift.vel` for `lift.vel`), for a function of
+    #: one parameter: what the device runs at now.
+    reading: Callable[[], Any] | None
+
+
+class Rule:
+    """One rule as it runs: its reads, its predicate, its state and what it acts on."""
+
+    def __init__(self, spec: RuleSpec, index: tuple[int, ...],
+                 predicate: Callable[[Sequence[float]], bool]) -> None:
+        self.spec = spec
+        self.name = spec.name
+        #: Where the rule's properties sit in `Interlocks.values`.
+        self.index = index
+        self.predicate = predicate
+        self.active = False
+        self.latched = False
+        #: The condition was seen true (not only unreadable) since the rule last became active.
+        self.seen_true = False
+        self.why = ""
+        #: Clock time since which the condition has been clear (None while it holds).
+        self.clear_since: float | None = None
+        #: Devices stopped when the rule becomes active: (slot, device).
+        self.stops: list[tuple[Any, str]] = []
+        self.limits: list[_Limit] = []
+        #: Every function the rule guards (a limit leaves motion of other functions alone).
+        self.functions: set[int] = set()
+
+    def evaluate(self, values: list[Any]) -> int:
+        """HOLDS, CLEAR, or the index of a property that cannot be read (fail closed: the
+        rule holds), from the values read last (`Interlocks.read`)."""
+        for i in self.index:
+            if values[i] is None:
+                return i
+        return HOLDS if self.predicate(values) else CLEAR
+
+    def refusal(self) -> str:
+        return f"{self.name} {self.why}"
+
+
+class Interlocks:
+    """Every rule of a robot, bound to its modules' tables (see the module docstring)."""
+
+    def __init__(self, specs: Sequence[RuleSpec], slots: Mapping[str, Any]) -> None:
+        self.slots = slots
+        self.rules: list[Rule] = []
+        self.by_name: dict[str, Rule] = {}
+        #: Every property a rule reads, once: (name, slot, reader), and the values read last
+        #: (None: unreadable). A tick reads each once, however many rules use it.
+        self.props: list[tuple[str, Any, Callable[[], Any]]] = []
+        self.values: list[Any] = []
+        self._prop_index: dict[str, int] = {}
+        #: Per guarded function: the properties its rules read.
+        self._guard_props: dict[tuple[str, str, str], tuple[int, ...]] = {}
+        #: (module, device, function) -> [(rule, REFUSE, ZERO_ONLY or LIMIT, lo, hi)]
+        self.guards: dict[tuple[str, str, str], list[tuple[Rule, int, int, int]]] = {}
+        #: Per module with a limit: the last motion function per device, and the last motion
+        #: request's parameters (valid until another request on the module), see `ran`.
+        self._last_fn: dict[str, dict[str, Function]] = {}
+        self._last_args: dict[str, tuple[Function, list[Any]] | None] = {}
+        self._zero: dict[tuple[str, str], tuple[Function, tuple[Any, ...]] | None] = {}
+        #: Observer hook (the flight recorder): None costs nothing.
+        self.on_change: InterlockHook | None = None
+        #: Called after rules stopped or slowed motion outside a request (the robot layer
+        #: moves its state's version and disarms an idle watchdog).
+        self.on_motion_changed: Callable[[float], None] | None = None
+        modules = {name: slot.module for name, slot in slots.items()}
+        for spec in specs:
+            self._bind(spec, modules)
+        for key, guards in self.guards.items():
+            self._guard_props[key] = tuple(sorted({i for rule, *_ in guards for i in rule.index}))
+        self._all = tuple(range(len(self.props)))
+        self._remembering = [(name, slot) for name, slot in slots.items()
+                             if name in self._last_args]
+
+    def _bind(self, spec: RuleSpec, modules: Mapping[str, Module]) -> None:
+        for prop in properties(spec.when):
+            if prop in self._prop_index:
+                continue
+            m = PROPERTY.match(prop)
+            module = modules.get(m.group(1)) if m else None
+            p = find_property(module, m.group(2), m.group(3)) if m and module else None
+            if m is None or module is None or p is None:  # the config check prevents this
+                raise ValueError(f"interlock {spec.name}: no property {prop}")
+            self._prop_index[prop] = len(self.props)
+            self.props.append((prop, self.slots[m.group(1)], p.read))
+            self.values.append(None)
+        index = self._prop_index
+        rule = Rule(spec, tuple(index[p] for p in properties(spec.when)),
+                    compile_condition(spec.when, index))
+        stop_devices: dict[tuple[str, str], None] = {}
+        for pattern, n in spec.patterns:
+            for mod, fn in motion_matches(pattern, modules):
+                rule.functions.add(id(fn))
+                key = (mod, fn.device, fn.name)
+                sp = speed_param(fn) if spec.action == "limit" else None
+                if spec.action == "limit" and sp is not None:
+                    assert n is not None
+                    lo, hi = max(sp.lo, -n), min(sp.hi, n)
+                    self.guards.setdefault(key, []).append((rule, LIMIT, lo, hi))
+                    reading = None
+                    if len(fn.params) == 1:
+                        prop_row = find_property(modules[mod], fn.device, fn.name)
+                        reading = prop_row.read if prop_row is not None else None
+                    rule.limits.append(_Limit(self.slots[mod], fn, lo, hi, reading))
+                    self._last_fn.setdefault(mod, {})
+                    self._last_args.setdefault(mod, None)
+                else:
+                    # A zero speed is a stop, and stops are never refused.
+                    effect = ZERO_ONLY if speed_param(fn) is not None else REFUSE
+                    self.guards.setdefault(key, []).append((rule, effect, 0, 0))
+                    stop_devices[(mod, fn.device)] = None
+        for mod, device in stop_devices:
+            rule.stops.append((self.slots[mod], device))
+            self._zero.setdefault((mod, device), _zero_of(modules[mod], device))
+        self.rules.append(rule)
+        self.by_name[rule.name] = rule
+
+    # -- the tick -----------------------------------------------------------------------------
+    def tick(self, now: float, dt: float) -> None:
+        """Scheduler task, before module work: every rule evaluated, limits enforced."""
+        self.read(self._all)
+        values = self.values
+        changed = False
+        for rule in self.rules:
+            for i in rule.index:  # Rule.evaluate, inline: this loop is the tick's cost
+                if values[i] is None:
+                    verdict = i
+                    break
+            else:
+                verdict = HOLDS if rule.predicate(values) else CLEAR
+            if verdict == CLEAR and not rule.active:
+                continue  # the common case: nothing to do
+            changed |= self.apply(rule, verdict, now)
+            if rule.active and rule.limits:
+                changed |= self._bring_down(rule)
+        for name, slot in self._remembering:
+            if self._last_args[name] is not None \
+                    and not (slot.state == "ok" and slot.module.is_moving()):
+                self._last_args[name] = None
+        if changed and self.on_motion_changed is not None:
+            self.on_motion_changed(now)
+
+    def read(self, indices: Sequence[int]) -> None:
+        """Read the properties at `indices` now: None for one that cannot be read (its
+        module not `ok`, a reading that is not a finite number, a reader that raised)."""
+        values, props = self.values, self.props
+        for i in indices:
+            _, slot, read = props[i]
+            if slot.state != "ok":
+                values[i] = None
+                continue
+            try:
+                v = read()
+                if v - v != 0:  # NaN or infinite
+                    v = None
+            except Exception:  # a reader that raised is a reading we do not have
+                v = None
+            values[i] = v
+
+    def update(self, rule: Rule, now: float) -> bool:
+        """Evaluate one rule on the values read last and `apply` the verdict."""
+        return self.apply(rule, rule.evaluate(self.values), now)
+
+    def apply(self, rule: Rule, verdict: int, now: float) -> bool:
+        """A rule's verdict: on a change, log it, tell the observer and act. True when
+        devices were told to stop."""
+        holds = verdict != CLEAR
+        unreadable = self.props[verdict][0] if verdict >= 0 else ""
+        if holds:
+            rule.clear_since = None
+            if not unreadable:
+                rule.seen_true = True
+                if rule.spec.latch:
+                    rule.latched = True
+        elif rule.clear_since is None:
+            rule.clear_since = now
+        # Released only once clear for RELEASE_AFTER_S: a reading hovering at the threshold
+        # (a lift held at 0.5 against `> 0.5`) keeps the rule active instead of flapping. A
+        # rule held only because a property could not be read (a module still attaching at
+        # boot) is released as soon as the reading is there and clear.
+        active = holds or rule.latched or (
+            rule.active and rule.seen_true
+            and now - rule.clear_since < RELEASE_AFTER_S)  # type: ignore[operator]
+        was = rule.active
+        rule.active = active
+        if active:  # what a refusal says: why it is active now
+            rule.why = (f"is active: {unreadable} cannot be read" if unreadable
+                        else "is active" if holds or not rule.latched else LATCHED)
+        if active == was:
+            return False
+        if not active:
+            rule.why = ""
+            rule.seen_true = False
+            log.info("interlock %s released", rule.name)
+            self._tell(rule, False, "released", now)
+            return False
+        if unreadable:
+            what = f"active (fail closed): {unreadable} cannot be read"
+        else:
+            what = f"active: {rule.spec.when}"
+            if rule.spec.latch:
+                what += f" (latched until robot:interlock.reset=({rule.name}))"
+        log.warning("interlock %s %s", rule.name, what)
+        self._tell(rule, True, what, now)
+        return self._stop_devices(rule)
+
+    def _tell(self, rule: Rule, active: bool, why: str, now: float) -> None:
+        if self.on_change is not None:
+            self.on_change(rule.name, active, why, now)
+
+    def _stop_devices(self, rule: Rule) -> bool:
+        stopped = False
+        for slot, device in rule.stops:
+            if slot.state != "ok":
+                continue  # its motion is already stopped
+            zero = self._zero.get((slot.name, device))
+            try:
+                if zero is not None:
+                    zero[0].run(*zero[1])
+                else:
+                    slot.module.stop()
+            except Exception:
+                log.exception("interlock %s: stopping %s:%s failed; stopping module %s",
+                              rule.name, slot.name, device, slot.name)
+                try:
+                    slot.module.stop()
+                except Exception:
+                    log.exception("module %s failed to stop", slot.name)
+            stopped = True
+        return stopped
+
+    def _bring_down(self, rule: Rule) -> bool:
+        """Motion of the rule's speed functions already outside +-n: run at the limit."""
+        changed = False
+        for lim in rule.limits:
+            slot = lim.slot
+            if slot.state != "ok":
+                continue
+            fn = lim.fn
+            if lim.reading is not None:
+                last = self._last_fn[slot.name].get(fn.device)
+                if last is not None and id(last) not in rule.functions:
+                    continue  # that motion comes from a function the rule leaves alone
+                try:
+                    v = lim.reading()
+                except Exception:
+                    continue
+                if not isinstance(v, int | float) or v != v or lim.lo <= v <= lim.hi:
+                    continue
+                args: list[Any] = [int(min(max(v, lim.lo), lim.hi))]
+            else:
+                remembered = self._last_args.get(slot.name)
+                if remembered is None or remembered[0] is not fn:
+                    continue
+                args = list(remembered[1])
+                if lim.lo <= args[0] <= lim.hi:
+                    continue
+                args[0] = min(max(args[0], lim.lo), lim.hi)
+            try:
+                fn.run(*args)
+            except Exception:
+                log.exception("interlock %s: slowing %s:%s.%s failed; stopping module %s",
+                              rule.name, slot.name, fn.device, fn.name, slot.name)
+                slot.module.stop()
+                continue
+            log.info("interlock %s: %s:%s.%s brought down to %s", rule.name, slot.name,
+                     fn.device, fn.name, args[0])
+            self.ran(slot.name, fn, args)
+            changed = True
+        return changed
+
+    # -- the request path ---------------------------------------------------------------------
+    def permit(self, module: str, fn: Function, values: list[Any], now: float) -> str | None:
+        """A motion request that passed every other check: None to run it (a limit clamps
+        `values[0]` in place), or why it is refused (`interlocked`)."""
+        key = (module, fn.device, fn.name)
+        guards = self.guards.get(key)
+        if guards is None:
+            return None
+        self.read(self._guard_props[key])
+        readings = self.values
+        refusal = None
+        stopped = False
+        for rule, effect, lo, hi in guards:
+            for i in rule.index:  # Rule.evaluate, inline (as in `tick`)
+                if readings[i] is None:
+                    verdict = i
+                    break
+            else:
+                verdict = HOLDS if rule.predicate(readings) else CLEAR
+            if verdict != CLEAR or rule.active:
+                stopped |= self.apply(rule, verdict, now)
+            if not rule.active:
+                continue
+            if effect == ZERO_ONLY:
+                if refusal is None and values[0] != 0:
+                    refusal = rule.refusal()
+            elif effect == REFUSE:
+                if refusal is None:
+                    refusal = rule.refusal() if rule.spec.action != "limit" else (
+                        f"{rule.name} limits {module}:{fn.device} and {fn.name} has no speed")
+            else:
+                values[0] = min(max(values[0], lo), hi)
+        if stopped and self.on_motion_changed is not None:
+            self.on_motion_changed(now)
+        return refusal
+
+    def ran(self, module: str, fn: Function, values: Sequence[Any]) -> None:
+        """An accepted motion or stop on `module` (only modules a limit watches keep this):
+        the last function per device, and the last request's parameters."""
+        last = self._last_fn.get(module)
+        if last is None:
+            if module == "robot" and fn.kind == "stop":
+                self.stopped_all()
+            return
+        if fn.kind == "motion":
+            last[fn.device] = fn
+            self._last_args[module] = (fn, list(values))
+        else:
+            last.clear()
+            self._last_args[module] = None
+
+    def stopped_all(self) -> None:
+        """`robot.stop` and every other robot-wide stop: nothing is remembered as running."""
+        for module, last in self._last_fn.items():
+            last.clear()
+            self._last_args[module] = None
+
+    def reset(self, name: str, now: float) -> str | None:
+        """`robot:interlock.reset=(NAME)`: None when done (or nothing to do), else why not."""
+        rule = self.by_name[name]
+        if not rule.latched:
+            return None
+        self.read(rule.index)
+        verdict = rule.evaluate(self.values)
+        if verdict >= 0:
+            return f"{name}: {self.props[verdict][0]} cannot be read; reset once it reads clear"
+        if verdict == HOLDS:
+            return f"{name}: its condition still holds; reset once it has cleared"
+        rule.latched = False
+        rule.clear_since = -math.inf  # acknowledged: released now
+        log.info("interlock %s reset", name)
+        self.update(rule, now)
+        return None
+
+    def active_names(self) -> tuple[str, ...]:
+        return tuple(r.name for r in self.rules if r.active)
+
+
+def _zero_of(module: Module, device: str) -> tuple[Function, tuple[Any, ...]] | None:
+    """How to stop one device: its speed function at 0 (one parameter preferred), else None
+    (the module's stop)."""
+    best = None
+    for fn in module.functions.values():
+        if fn.device != device or speed_param(fn) is None:
+            continue
+        try:
+            rest = tuple(_neutral(p) for p in fn.params[1:])
+        except ValueError:
+            continue
+        if best is None or len(fn.params) < len(best[0].params):
+            best = (fn, (0, *rest))
+    return best
