@@ -37,7 +37,7 @@ OURS = re.compile(
 
 #: Commands that serve until stopped or run for minutes: a block with one must be marked
 #: illustrative, never run by a test.
-NEVER_ENDING = re.compile(r"(^|\s)(make (run|teleop|mission|test|bench|fuzz|campaign)\b"
+NEVER_ENDING = re.compile(r"(^|\s|/)(make (run|teleop|mission|test|bench|fuzz|campaign)\b"
                           r"|ramp run\b|ramp-teleop\b|ramp-autonomy --|--realtime)")
 
 

@@ -84,10 +84,14 @@ def axis_angle(axis: Vec3, angle: float) -> Mat3:
 
 
 def mat_mul(a: Mat3, b: Mat3) -> Mat3:
-    cols = tuple(zip(*b, strict=True))
+    """Written out (it runs several times a tick); `0.0 +` first keeps the exact sums (and
+    the sign of a zero) that `sum()` gave on the Python this project runs."""
+    (b00, b01, b02), (b10, b11, b12), (b20, b21, b22) = b
     return tuple(  # type: ignore[return-value]
-        tuple(sum(ai * bi for ai, bi in zip(row, col, strict=True)) for col in cols)
-        for row in a
+        (0.0 + r0 * b00 + r1 * b10 + r2 * b20,
+         0.0 + r0 * b01 + r1 * b11 + r2 * b21,
+         0.0 + r0 * b02 + r1 * b12 + r2 * b22)
+        for r0, r1, r2 in a
     )
 
 
@@ -105,9 +109,10 @@ def transpose(a: Mat3) -> Mat3:
 
 def angle_between(u: Vec3, v: Vec3) -> float:
     """The angle in radians between two non-zero vectors."""
-    dot = sum(a * b for a, b in zip(u, v, strict=True))
-    nu = math.sqrt(sum(a * a for a in u))
-    nv = math.sqrt(sum(b * b for b in v))
+    (u0, u1, u2), (v0, v1, v2) = u, v  # written out as mat_mul, the same sums
+    dot = 0.0 + u0 * v0 + u1 * v1 + u2 * v2
+    nu = math.sqrt(0.0 + u0 * u0 + u1 * u1 + u2 * u2)
+    nv = math.sqrt(0.0 + v0 * v0 + v1 * v1 + v2 * v2)
     return math.acos(max(-1.0, min(1.0, dot / (nu * nv))))
 
 

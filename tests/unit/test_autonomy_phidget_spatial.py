@@ -105,6 +105,27 @@ def test_a_steady_stream_keeps_order_and_loses_nothing(lib: FakeLibrary) -> None
     assert times == sorted(times)
 
 
+def test_a_board_clock_running_ahead_never_sends_sample_times_backwards(
+        lib: FakeLibrary) -> None:
+    # The steady-stream test above found this only when the library thread outran the ticks:
+    # a stretch whose board time runs ahead pulls the anchor back, and its first samples were
+    # timed before the last one already handed on.
+    imu, ch = open_imu(lib)
+    on_library_thread(ch.plug)
+    imu.tick(0.01, 0.01)
+    for i in range(11):  # 0..80 ms of board time by the tick at 0.02
+        on_library_thread(lambda ms=8.0 * i: level(ch, ms))
+    imu.tick(0.02, 0.01)
+    first = imu.drain()
+    for i in range(11, 51):  # 88..400 ms of board time by the tick at 0.03: far ahead
+        on_library_thread(lambda ms=8.0 * i: level(ch, ms))
+    imu.tick(0.03, 0.01)
+    times = [s.t for s in first + imu.drain()]
+    assert len(times) == 51
+    assert times == sorted(times)
+    assert times[-1] <= 0.03  # and still never in the future
+
+
 def test_detach_is_a_fault_and_reattach_clears_it(lib: FakeLibrary,
                                                   caplog: pytest.LogCaptureFixture) -> None:
     imu, ch = open_imu(lib, serial=42)

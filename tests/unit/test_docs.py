@@ -156,6 +156,9 @@ def test_a_block_is_fit_to_run_only_with_our_own_commands_that_end() -> None:
     assert "not a command of ours" in str(runnable(block("pip install '.[teleop]'")))
     assert "does not end" in str(runnable(block("ramp-teleop --backend 10.0.0.1:5577")))
     assert "does not end" in str(runnable(block("make run")))
+    # the venv's own path to a server is a server too (one ran on for ever after its test)
+    assert "does not end" in str(runnable(block(".venv/bin/ramp run --sim --config x.yaml")))
+    assert "does not end" in str(runnable(block(".venv/bin/ramp-teleop --backend h:1")))
 
 
 def test_a_console_block_runs_only_its_prompt_lines() -> None:

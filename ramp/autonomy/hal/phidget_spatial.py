@@ -54,6 +54,8 @@ class PhidgetImu(Imu):
         self._ch: Any = None
         self._queue: queue.SimpleQueue[pc.Event] = queue.SimpleQueue()
         self._anchor: tuple[float, float] | None = None  # (clock s, board ms)
+        #: The time of the last sample handed on: a re-anchored stretch never goes before it.
+        self._last_t = -math.inf
         self._last_ms: float | None = None
         #: Error events seen, per Phidget22 error-event code.
         self.error_counts: dict[int, int] = {}
@@ -157,7 +159,7 @@ class PhidgetImu(Imu):
     def _samples(self, now: float, run: list[tuple[Any, ...]]) -> None:
         """Lay the board's timestamps onto the clock: a fresh anchor (after an attach, or
         when the board's time runs backwards) puts the newest sample of its stretch at
-        `now`, and no sample is ever later than `now`."""
+        `now`, no sample is ever later than `now`, and none is earlier than the one before."""
         start = 0
         for i in range(len(run) + 1):
             if i < len(run) and not (i > start and float(run[i][3]) < float(run[i - 1][3])):
@@ -176,7 +178,11 @@ class PhidgetImu(Imu):
             t0, ms0 = self._anchor
             for accel, gyro, mag, timestamp_ms in part:
                 ms = float(timestamp_ms)
-                self._accept(ImuSample(t=t0 + (ms - ms0) / 1000.0, timestamp_ms=ms,
+                # Pulling the anchor back (a board clock that ran ahead) must not put a sample
+                # before one already handed on: sample times only ever go forward.
+                t = max(t0 + (ms - ms0) / 1000.0, self._last_t)
+                self._last_t = t
+                self._accept(ImuSample(t=t, timestamp_ms=ms,
                                        accel_g=_vec(accel), gyro_dps=_vec(gyro),
                                        mag_gauss=_mag(mag)), now)
             self._last_ms = last_ms
