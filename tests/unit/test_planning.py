@@ -24,6 +24,7 @@ from ramp.autonomy.planning import (
     plan_to_dock,
     swept_poses,
 )
+from ramp.autonomy.planning.geometry import point_clearance
 from ramp.autonomy.planning.path import end_yaw
 from tests.unit.rmc_layouts import random_layout, random_start, sampled_clearance
 
@@ -178,7 +179,7 @@ def test_dig_spots_never_repeat_stay_in_the_digging_region_and_are_reachable() -
     sites = DigSites(planner)
     dock = docking_approaches(planner)[0].approach
     rows = []
-    for _ in range(6):
+    for _ in range(5):
         spot, plan = sites.next_spot(dock, reference=dock.xy)
         assert spot is not None and plan.ok, plan.reason
         t = spot.trench
@@ -188,8 +189,36 @@ def test_dig_spots_never_repeat_stay_in_the_digging_region_and_are_reachable() -
         sites.mark_dug(spot)
         rows.append(math.floor((spot.pose.x - (4.44 - 0.6)) / 0.55 + 1e-9))
     poses = {(s.x0, s.y0) for s in sites.dug}
-    assert len(poses) == 6
+    assert len(poses) == 5
     assert rows == sorted(rows) and rows[0] == 0  # the row nearest the collector first
+
+
+@pytest.mark.parametrize("seed", [None, 3, 8])
+def test_every_dig_spot_leaves_room_to_turn_clear_of_the_walls_however_many_cycles(
+        seed: int | None) -> None:
+    # A spot at y 0.60 (footprint 0.225 m from the y = 0 wall, 0.11 m short of a turn in
+    # place) was entered and left by reversing and arcing beside the wall at the planner's
+    # thinnest margin, and a long run grazed the wall there on its sixth cycle. Every spot,
+    # on every cycle until the digging region is used up, must let the robot turn full
+    # circle at the spot and at the end of its creep with the nominal margin to each wall.
+    arena = ArenaMap() if seed is None else random_layout(random.Random(seed))
+    planner = Planner(arena)
+    sites = DigSites(planner)
+    dock = docking_approaches(planner)[0].approach
+    need = planner.config.robot.circumradius_m + planner.config.margin_m
+    walls_only = ArenaMap(arena.length, arena.width)
+    cycles = 0
+    while cycles < 40:
+        spots = sites.candidates(dock.xy)
+        if not spots:
+            break
+        for spot in spots:
+            for x in (spot.pose.x, spot.pose.x + sites.config.creep_m):
+                wall = point_clearance(walls_only, np.array([x]), np.array([spot.pose.y]))[0]
+                assert wall >= need - 1e-9, (spot.pose, wall, need)
+        sites.mark_dug(spots[0])
+        cycles += 1
+    assert cycles >= 5  # the digging region still holds many cycles
 
 
 def test_docking_approach_backs_straight_onto_the_wall_centred_on_the_collector() -> None:

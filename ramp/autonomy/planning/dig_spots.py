@@ -5,6 +5,10 @@ while the robot creeps forward. A spot is the pose where digging starts, facing 
 (yaw 0) so the trench runs along +x. A spot is acceptable when
 
 - its trench lies inside the digging region (x >= 4.44 m) and clear of the walls;
+- the robot can turn full circle, clear of every wall by the planner's nominal margin, where
+  it arrives (the spot) and where it leaves (the end of the creep): a spot too near a wall to
+  turn is entered and left by reversing and arcing beside that wall at the planner's thinnest
+  margin, where a few centimetres of drift in the pose estimate grazed it on long runs;
 - the footprint, from the spot to the end of the creep, is clear of obstacles and walls by
   the planner's check margin, and does not stand on an earlier trench;
 - its trench keeps `spacing_m` from every earlier trench (digging the same hole again yields
@@ -79,6 +83,16 @@ class DigSpot:
     trip_m: float
 
 
+def _packed(lo: float, hi: float, pitch: float) -> list[float]:
+    """As many positions from `lo` to `hi` as fit at least `pitch` apart, evenly spread."""
+    if hi < lo:
+        return []
+    n = int(math.floor((hi - lo) / pitch + 1e-9)) + 1
+    if n == 1:
+        return [0.5 * (lo + hi)]
+    return [lo + k * (hi - lo) / (n - 1) for k in range(n)]
+
+
 class DigSites:
     """Chooses digging spots that never repeat; remembers the trenches already dug."""
 
@@ -123,17 +137,22 @@ class DigSites:
                 return []
             dist = np.where(np.isfinite(dijkstra(grid.blocked, grid.cost, from_cell)), dist,
                             math.inf)
+        spin = robot.circumradius_m + planner.config.margin_m  # room to turn, from any wall
         x_lo = cfg.dig_start_x_m - hl  # trench starts at the front edge
-        x_hi = arena.length - cfg.wall_gap_m - cfg.reach_m - cfg.creep_m - hl
-        y_lo, y_hi = hw + cfg.wall_gap_m, arena.width - hw - cfg.wall_gap_m
+        x_hi = min(arena.length - cfg.wall_gap_m - cfg.reach_m - cfg.creep_m - hl,
+                   arena.length - spin - cfg.creep_m)
+        y_lo = max(hw + cfg.wall_gap_m, spin)
+        y_hi = min(arena.width - hw - cfg.wall_gap_m, arena.width - spin)
         xs = np.arange(math.ceil(x_lo / cfg.step_m), math.floor(x_hi / cfg.step_m) + 1) \
             * cfg.step_m
-        ys = np.arange(math.ceil(y_lo / cfg.step_m), math.floor(y_hi / cfg.step_m) + 1) \
+        grid_ys = np.arange(math.ceil(y_lo / cfg.step_m), math.floor(y_hi / cfg.step_m) + 1) \
             * cfg.step_m
+        packed = _packed(y_lo, y_hi, cfg.trench_width_m + cfg.spacing_m)
+        ys = sorted({round(float(v), 6) for v in (*grid_ys, *packed)})
         spots: list[DigSpot] = []
         for x in xs:
             for y in ys:
-                x, y = float(round(x, 6)), float(round(y, 6))
+                x, y = float(round(x, 6)), float(y)
                 cell = grid.cell_of(x, y)
                 if cell is None or not math.isfinite(dist[cell]):
                     continue
@@ -152,7 +171,11 @@ class DigSites:
         # Rows across the arena, the row nearest the collector first (short trips), so that
         # trenches pack side by side instead of scattering; in a row, the cheapest trip first.
         row = cfg.creep_m + cfg.reach_m
+        # Across a row, the evenly packed places first, so the row holds as many trenches as
+        # its width allows whatever order the trips rank them in.
+        lanes = {round(float(v), 6) for v in packed}
         spots.sort(key=lambda s: (math.floor((s.pose.x - x_lo) / row + 1e-9),
+                                  round(s.pose.y, 6) not in lanes,
                                   round(s.trip_m, 6), abs(s.pose.y - reference[1]), s.pose.x))
         return spots
 
