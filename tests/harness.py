@@ -221,3 +221,10 @@ def robot_harness(name: str, **kwargs: Any) -> SimHarness:
     """One of `ROBOTS` on its emulators."""
     text, marte = ROBOTS[name]
     return SimHarness(text, marte=marte, **kwargs)
+
+
+def value(resp: str, key: str) -> str:
+    """The first value of `key` (`MODULE:DEVICE.PROPERTY`) in a response line."""
+    m = re.search(re.escape(key) + r"=\(([^)]*)\)", resp)
+    assert m, f"{key} not in {resp}"
+    return m.group(1)

@@ -3,11 +3,9 @@ simulated MARTE, watched on the emulated wire (what the Sabertooth emulators rec
 
 from __future__ import annotations
 
-import re
-
 import pytest
 
-from tests.harness import SimHarness
+from tests.harness import SimHarness, value
 from tests.harness import TestClient as Client
 
 
@@ -16,12 +14,6 @@ def h() -> SimHarness:
     harness = SimHarness()
     yield harness
     harness.close()
-
-
-def value(resp: str, key: str) -> str:
-    m = re.search(re.escape(key) + r"=\(([^)]*)\)", resp)
-    assert m, f"{key} not in {resp}"
-    return m.group(1)
 
 
 def base_wire(h: SimHarness) -> list[float]:

@@ -7,7 +7,6 @@ times a second."""
 from __future__ import annotations
 
 import logging
-import re
 from typing import Any
 
 import pytest
@@ -18,7 +17,7 @@ from ramp.hal.interfaces import Bus
 from ramp.hal.simio import SimBus
 from ramp.layers.module_distribution import Task
 from ramp.runtime import build
-from tests.harness import FakeWorld, Harness, config_from
+from tests.harness import FakeWorld, Harness, config_from, value
 
 # The Base on one healthy bus ("io"), a demo module on a broken one ("bad", first in the
 # dict, so its tick runs before io's), and an arm on a third.
@@ -80,12 +79,6 @@ def h() -> Any:
     harness.sup.settle()
     yield harness
     harness.close()
-
-
-def value(resp: str, key: str) -> str:
-    m = re.search(re.escape(key) + r"=\(([^)]*)\)", resp)
-    assert m, f"{key} not in {resp}"
-    return m.group(1)
 
 
 def tracebacks(caplog: pytest.LogCaptureFixture) -> int:

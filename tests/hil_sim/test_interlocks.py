@@ -4,14 +4,13 @@ injected with the `sim` module (SPEC 12), as an acceptance test would."""
 
 from __future__ import annotations
 
-import re
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from ramp.runtime.observers import Observer
-from tests.harness import MARTE_YAML, SimHarness
+from tests.harness import MARTE_YAML, SimHarness, value
 from tests.harness import TestClient as Client
 
 #: MARTE's wiring without its shipped rules: these tests bring their own.
@@ -52,12 +51,6 @@ def h(events: Events) -> Iterator[SimHarness]:
     harness = SimHarness(WIRING + RULES, observer=events)
     yield harness
     harness.close()
-
-
-def value(resp: str, key: str) -> str:
-    m = re.search(re.escape(key) + r"=\(([^)]*)\)", resp)
-    assert m, f"{key} not in {resp}"
-    return m.group(1)
 
 
 def active(c: Client) -> str:

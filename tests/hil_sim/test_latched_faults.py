@@ -3,11 +3,9 @@ jammed through the `sim` module, over TCP, watched on the emulated wire."""
 
 from __future__ import annotations
 
-import re
-
 import pytest
 
-from tests.harness import SimHarness
+from tests.harness import SimHarness, value
 from tests.harness import TestClient as Client
 
 
@@ -16,12 +14,6 @@ def h() -> SimHarness:
     harness = SimHarness()
     yield harness
     harness.close()
-
-
-def value(resp: str, key: str) -> str:
-    m = re.search(re.escape(key) + r"=\(([^)]*)\)", resp)
-    assert m, f"{key} not in {resp}"
-    return m.group(1)
 
 
 def lift_wire(h: SimHarness) -> float:

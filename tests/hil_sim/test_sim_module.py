@@ -4,12 +4,11 @@ seen through the real backend's paths (stall detection, hot plug, input readings
 from __future__ import annotations
 
 import math
-import re
 import socket
 
 import pytest
 
-from tests.harness import Harness, SimHarness
+from tests.harness import Harness, SimHarness, value
 from tests.harness import TestClient as Client
 from tests.harness import ask_line as ask
 from tests.harness import start_ramp as start
@@ -20,12 +19,6 @@ def h() -> SimHarness:
     harness = SimHarness()
     yield harness
     harness.close()
-
-
-def value(resp: str, key: str) -> str:
-    m = re.search(re.escape(key) + r"=\(([^)]*)\)", resp)
-    assert m, f"{key} not in {resp}"
-    return m.group(1)
 
 
 def fed(h: SimHarness, c: Client, seconds: float) -> None:
