@@ -228,3 +228,15 @@ def value(resp: str, key: str) -> str:
     m = re.search(re.escape(key) + r"=\(([^)]*)\)", resp)
     assert m, f"{key} not in {resp}"
     return m.group(1)
+
+
+def stop_process(proc: subprocess.Popen[Any]) -> None:
+    """End a process a test started: SIGTERM, then SIGKILL if it has not gone in 5 s."""
+    proc.terminate()
+    try:
+        proc.wait(timeout=5)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(timeout=5)
+    if proc.stdout is not None:
+        proc.stdout.close()

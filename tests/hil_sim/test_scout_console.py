@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 
 from ramp.mcp.client import McpClient
-from tests.harness import start_ramp
+from tests.harness import start_ramp, stop_process
 from tests.hil_sim.test_teleop_browser import (
     CHROMIUM,
     CHROMIUM_FLAGS,
@@ -38,14 +38,7 @@ def scout() -> Iterator[tuple[str, int]]:
     try:
         yield host, port
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=5)
-        if proc.stdout is not None:
-            proc.stdout.close()
+        stop_process(proc)
 
 
 def test_the_arm_plugin_is_on_the_console_and_moves_from_it(

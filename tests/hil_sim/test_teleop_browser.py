@@ -29,7 +29,7 @@ from typing import Any
 import pytest
 
 from ramp.mcp.client import McpClient
-from tests.harness import start_ramp
+from tests.harness import start_ramp, stop_process
 
 REPO = Path(__file__).resolve().parents[2]
 CHROMIUM = "/usr/bin/chromium"
@@ -111,14 +111,7 @@ def robot() -> Iterator[tuple[str, int]]:
     try:
         yield host, port
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=5)
-        if proc.stdout is not None:
-            proc.stdout.close()
+        stop_process(proc)
 
 
 @pytest.fixture(scope="module")

@@ -25,7 +25,7 @@ import pytest
 from ramp.mcp.aio import AsyncMcpClient
 from ramp.teleop.console import Console
 from ramp.teleop.profile import DEFAULT_PROFILE, ProfileLibrary
-from tests.harness import start_ramp
+from tests.harness import start_ramp, stop_process
 
 WHEELS = ("lf_wheel", "lb_wheel", "rf_wheel", "rb_wheel")
 
@@ -39,14 +39,7 @@ def robot() -> Iterator[tuple[subprocess.Popen[str], str, int]]:
     finally:
         if proc.poll() is None:
             os.kill(proc.pid, signal.SIGCONT)
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=5)
-        if proc.stdout is not None:
-            proc.stdout.close()
+        stop_process(proc)
 
 
 def pad_frame(forward: float, lb: bool) -> dict[str, Any]:
