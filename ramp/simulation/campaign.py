@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import logging
 import os
 import sys
 import time
@@ -119,6 +120,7 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
     # Wall time of a whole mission is what a campaign reports; this is a command-line tool,
     # not control code, so the wall clock is the right clock here.
     started = time.perf_counter()
+    _log_errors_only()
     try:
         extra = {"randomize": True} if spec.randomize else {}
         summary = load_mission(spec.mission)(spec.seed, spec.start_box, spec.heading,
@@ -146,6 +148,16 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
         "summary": summary,
     })
     return row
+
+
+def _log_errors_only() -> None:
+    """A worker logs errors only, as `ramp sim mission` does: a fresh (spawned) process has
+    no logging set up, and Python's last-resort handler would print every warning of every
+    run (each interlock engaging, each re-plan) between the progress bar's lines. What a
+    run did is in its row and summary."""
+    root = logging.getLogger()
+    if not root.handlers:
+        logging.basicConfig(level=logging.ERROR, format="%(levelname)s %(name)s: %(message)s")
 
 
 def succeeded(row: dict[str, Any]) -> bool:

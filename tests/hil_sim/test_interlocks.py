@@ -346,3 +346,21 @@ def test_a_latched_rule_does_not_latch_on_an_unreadable_property(h: SimHarness) 
     assert c.ask("sim:bus.plug=(sbc_io)") == ""
     h.advance(2.5)
     assert "bumper" not in active(c)
+
+
+def test_a_limit_engaging_is_a_note_a_refusal_is_a_warning(
+        h: SimHarness, caplog: pytest.LogCaptureFixture) -> None:
+    """A limit engaging is routine (MARTE slows every time it digs) and is logged at INFO;
+    a rule that refuses or stops motion is a WARNING an operator should see."""
+    import logging
+
+    c = h.connect()
+    lift_at(h, c, 0.3)  # ladder_down_slow released
+    with caplog.at_level(logging.INFO, logger="ramp"):
+        caplog.clear()
+        lift_at(h, c, 0.1)  # the limit engages
+        lift_at(h, c, 0.7)  # the refusal engages
+    levels = {r.getMessage().split()[1]: r.levelno for r in caplog.records
+              if r.getMessage().startswith("interlock ") and " active" in r.getMessage()}
+    assert levels == {"ladder_down_slow": logging.INFO,
+                      "chain_needs_ladder_down": logging.WARNING}, levels

@@ -72,3 +72,12 @@ def says_randomized(seed: int, start_box: str, heading: int, fault: str, duratio
     """Delivers 20 kg when told to randomize, 0 otherwise."""
     return summary(seed, start_box, heading, fault, "completed", 20.0 if randomize else 0.0,
                    duration)
+
+
+def chatty(seed: int, start_box: str, heading: int, fault: str,
+           duration: float) -> dict[str, Any]:
+    """As `arithmetic`, warning on the way as a real run's interlocks and re-plans do."""
+    import logging
+
+    logging.getLogger("ramp.interlocks").warning("interlock digging_creep active: test")
+    return arithmetic(seed, start_box, heading, fault, duration)

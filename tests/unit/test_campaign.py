@@ -157,3 +157,19 @@ def test_randomize_reaches_every_run_and_the_report() -> None:
     assert report(specs, rows, workers=1, cluster=None, wall_time_s=0.0)["randomize"] is True
     plain = plan_runs(1, 5, mission=mission)
     assert run_one(plain[0])["delivered_kg"] == 0.0
+
+
+def test_a_workers_warnings_stay_out_of_the_campaigns_output() -> None:
+    """Spawned workers start with no logging set up; Python's last-resort handler would print
+    every run's warnings between the progress bar's lines."""
+    import subprocess
+    import sys
+
+    code = ("from ramp.simulation.campaign import plan_runs, run_campaign\n"
+            "rows = run_campaign(plan_runs(2, seed=1, "
+            "mission='tests.unit.campaign_missions:chatty'), workers=1)\n"
+            "print(len(rows), rows[0]['outcome'])\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, check=True)
+    assert done.stdout.split() == ["2", "completed"]
+    assert "interlock" not in done.stderr, done.stderr

@@ -351,7 +351,11 @@ class Interlocks:
             what = f"active: {rule.spec.when}"
             if rule.spec.latch:
                 what += f" (latched until robot:interlock.reset=({rule.name}))"
-        log.warning("interlock %s %s", rule.name, what)
+        # A limit engaging is the rule working as designed (slow while digging): a note. A
+        # refusal, a stop or a latch, or any rule failing closed, is worth a warning.
+        routine = rule.spec.action == "limit" and not rule.spec.latch and not unreadable
+        log.log(logging.INFO if routine else logging.WARNING, "interlock %s %s", rule.name,
+                what)
         self._tell(rule, True, what, now)
         return self._stop_devices(rule)
 
