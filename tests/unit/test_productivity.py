@@ -19,17 +19,33 @@ def test_with_time_for_one_full_bin_and_a_second_it_digs_the_bin_full_first() ->
     assert plan.dig_s == pytest.approx(FULL_S)
 
 
-def test_two_cycles_that_cannot_both_fill_the_bin_fill_the_first() -> None:
-    # 400 s left: 290 s to dig; two cycles dig 160 s (one cycle: only 120 s). The first
-    # takes a full bin and leaves the second its 40 s: if the second no longer fits (a slow
-    # way home), the run has the bigger load already.
+def test_two_cycles_that_cannot_both_fill_the_bin_share_the_digging_evenly() -> None:
+    # 400 s left: 290 s to dig; two cycles dig 160 s (one cycle: only 120 s), 80 s each:
+    # the second has 50 s of slack over the shortest dig against a slow way home.
     plan = plan_dig(400.0, 30.0, EST, FULL_S)
     assert plan.cycles == 2
-    assert plan.dig_s == pytest.approx(FULL_S)
-    # 370 s left: two cycles dig 130 s (one: 120 s); the first 100 s, the second its 30 s
+    assert plan.dig_s == pytest.approx(80.0)
+    # 370 s left: two cycles dig 130 s (one: 120 s), 65 s each.
     plan = plan_dig(370.0, 30.0, EST, FULL_S)
     assert plan.cycles == 2
-    assert plan.dig_s == pytest.approx(100.0)
+    assert plan.dig_s == pytest.approx(65.0)
+
+
+def test_an_even_share_keeps_the_second_cycle_when_the_way_home_is_slower_than_guessed(
+        ) -> None:
+    """Seed 1 as it ran: the first dig began with 503 s left, the way out measured (72 s),
+    the way home and the dock guessed (60 s each). Home took 93 s and docking 32 s. Filling
+    the bin first (120 s) left 228 s after the first deposit against a 241 s cycle: the run
+    ended at 342 s with one load. The even share digs 80.5 s and leaves the second cycle
+    room."""
+    guessed = Estimates(trip_s=72.0, dock_deposit_s=60.0, min_dig_s=30.0, home_s=60.0)
+    plan = plan_dig(503.0, 30.0, guessed, FULL_S)
+    assert plan.cycles == 2
+    assert plan.dig_s == pytest.approx((503.0 - 30.0 - 120.0 - 192.0) / 2)
+    measured = Estimates(trip_s=72.0, dock_deposit_s=46.0, min_dig_s=30.0, home_s=93.0)
+    first_cycle = plan.dig_s + 93.0 + 32.0  # the dig, home, dock and deposit as they ran
+    left_after = 503.0 - first_cycle
+    assert left_after - 30.0 >= measured.cycle_s()
 
 
 def test_near_the_end_the_last_dig_is_shorter_so_the_deposit_lands_before_the_end() -> None:

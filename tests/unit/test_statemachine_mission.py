@@ -68,6 +68,21 @@ def test_the_machine_measures_its_legs_for_the_end_decisions() -> None:
     assert 16.0 < est.home_s < 30.0  # the way home is measured on its own
 
 
+def test_until_the_way_home_is_driven_it_is_taken_as_long_as_the_way_out() -> None:
+    """The first dig is sized with a way home: the guess (60 s) was 30 s short on a slow
+    layout, so the measured way out stands in for it until home has been driven once."""
+    run = make_run()
+    seen: list[tuple[str, float, float]] = []
+    est = run.mission.context.estimates
+    run.mission.add_listener(lambda c: seen.append((c.dest, est.trip_s, est.home_s)))
+    run.run(300)
+    at_dig = next((trip, home) for dest, trip, home in seen if dest == "excavate")
+    assert at_dig[0] < 60.0 and at_dig[1] == at_dig[0]
+    # from the first dock on, the way home is its own measurement (here shorter than out)
+    after_dock = [(trip, home) for dest, trip, home in seen if dest == "deposit"]
+    assert after_dock and after_dock[0][1] != after_dock[0][0]
+
+
 def test_near_the_end_a_loaded_robot_heads_home_and_delivers_its_last_load() -> None:
     run = make_run(Script(target_kg=1000.0), duration_s=300)  # digs until told
     ctx = run.mission.context
