@@ -128,7 +128,8 @@ class TickLog:
                 "late_us": {"p50": round(self.percentile_us(0.50)),
                             "p99": round(self.percentile_us(0.99)),
                             "max": round(self.max_us)},
-                "stalls": s.stalls, "overruns": s.stats.overruns, "skipped": s.stats.skipped}
+                "stalls": s.stalls, "overruns": s.stats.overruns, "skipped": s.stats.skipped,
+                "last_overrun": s.stats.last_overrun_task}
 
 
 # -- the simulator's side ------------------------------------------------------------------
@@ -342,8 +343,6 @@ class ArenaProcess:
                                      stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                      start_new_session=True)
         theirs.close()  # the child's end: its death must close the link
-        if os.environ.get("RAMP_EXPERIMENT_NICE"):
-            os.nice(int(os.environ["RAMP_EXPERIMENT_NICE"]))
         self.pid = self.proc.pid
         self.link = SensorLink(mine, name="sensor link (autonomy)")
         self.ready: Message | None = None
