@@ -75,7 +75,8 @@ def add_mission_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser])
                         "--realtime")
     p.add_argument("--realtime", action="store_true",
                    help="run on the wall clock and serve MCP (see --port) so an operator "
-                        "can watch with ramp-shell or ramp-teleop and take over")
+                        "can watch with ramp-shell or ramp-teleop and take over; the robot "
+                        "and the arena run in a process of their own, as on the robot")
     p.add_argument("--port", type=int, default=None, metavar="P",
                    help=f"with --realtime: the MCP port (default {REALTIME_PORT}; 0 picks "
                         "a free one)")
@@ -101,6 +102,7 @@ def cmd_mission(args: argparse.Namespace) -> int:
 def _mission(args: argparse.Namespace) -> int:
     from firmware_like.world_file import WorldFileError
     from ramp.errors import ConfigErrors
+    from ramp.simulation.arena_process import ArenaError
     from ramp.simulation.arguments import ArgumentError, check_duration, check_seed
     from ramp.simulation.campaign import combination
     from ramp.simulation.mission import MissionOptions, MissionRun
@@ -147,11 +149,15 @@ def _mission(args: argparse.Namespace) -> int:
             return 2
         except ValueError as exc:
             raise UsageError(str(exc)) from exc
-        if args.record or args.foxglove_port is not None:
-            _watch(run, args)
-        if args.realtime:
-            if run.autonomy is None:
+        try:
+            if args.record or args.foxglove_port is not None:
+                _watch(run, args)
+            if args.realtime and run.autonomy is None:
                 run.build()
+        except ArenaError as exc:  # the simulator's process could not start (a port in use)
+            print(f"ramp sim mission: {exc}", file=sys.stderr)
+            return 1
+        if args.realtime:
             host, port = run.mcp_address
             print(f"ramp sim mission: running on the wall clock; MCP on {host}:{port} "
                   f"(watch: ramp-shell {host}:{port}; take over: "

@@ -239,3 +239,19 @@ def test_the_sim_module_reaches_the_emulators_in_the_simulators_process() -> Non
         end = arena.finish()
     assert end is not None and end["why"] == "the autonomy's process asked"
     assert arena.proc.returncode == 0
+
+
+def test_a_port_in_use_ends_the_command_saying_so() -> None:
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen()
+    try:
+        out = subprocess.run(
+            [sys.executable, "-m", "ramp.cli", "sim", "mission", "--realtime", "--port",
+             str(busy.getsockname()[1]), "--duration", "5"], cwd=REPO, capture_output=True,
+            text=True, timeout=90, env=ENV)
+    finally:
+        busy.close()
+    assert out.returncode == 1
+    assert ("ramp sim mission: the simulator's process could not start: OSError: [Errno 98] "
+            "Address already in use") in out.stderr
