@@ -22,6 +22,7 @@ AUTONOMY_SECTIONS: tuple[str, ...] = (
         "perception",
         "mission",
         "console_bandwidth",
+        "realtime",
     )
     if find_spec("ramp.autonomy") is not None else ())
 

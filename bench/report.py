@@ -342,6 +342,20 @@ def render(doc: dict[str, Any]) -> str:
         out += [f"| **both** | **{_num(b['total_bps'])}** | | |", "",
                 f"Busiest second {_num(b['busiest_second_bps'])} B/s; the mission went "
                 f"through {', '.join(b['states'])}.", ""]
+    r = doc.get("realtime")
+    if r and "error" not in r:
+        out += [f"**realtime** (the backend's tick during `ramp sim mission --realtime`, seed "
+                f"{r['seed']}, {r['seconds']:g} s each, measured in the backend's process over "
+                "the whole run; before: `--single-loop`, everything on the autonomy's loop; "
+                "after: the robot and the arena in their own process)", "",
+                "| | p50 µs | p99 µs | max µs | stalls | overruns |", "|---|---|---|---|---|---|"]
+        for name, label in (("single_loop", "one loop (before)"),
+                            ("apart", "own process (after)")):
+            x = r[name]
+            late = x["late_us"] or {}
+            out.append(f"| {label} | {_num(late.get('p50'))} | {_num(late.get('p99'))} | "
+                       f"{_num(late.get('max'))} | {x['stalls']} | {x['overruns']} |")
+        out.append("")
     return "\n".join(out)
 
 

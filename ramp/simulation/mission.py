@@ -9,6 +9,15 @@ its real drivers, its MCP link to the backend over TCP, the executive and the mi
 On the virtual clock a 10-minute run takes seconds and the same arguments give the same run;
 with `realtime` it runs on the wall clock and serves MCP on a port an operator can use.
 
+With `realtime` the robot and the arena run in a process of their own, as on the robot
+(`ramp.simulation.arena_process`: the world, the backend, the emulators, the `sim` module,
+on their own scheduler), so the autonomy's heavy work never makes the backend's tick late;
+this process keeps the autonomy, exactly as `ramp-autonomy` runs it, with its sensors over
+SCIP/TCP and the sensor link (`ramp.autonomy.hal.simlink`), the trace, the summary and the
+observers, which read the world's truth as the child sends it (`MirroredWorld`). The hidden
+`single_loop` option runs realtime the old way, everything on one loop (for
+`python -m bench --only realtime`, which measures the difference).
+
 What comes out:
 
 - every state change, as it happens (`on_change`);
@@ -28,11 +37,12 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 from firmware_like.marte import MarteWorld
 from firmware_like.randomize import Randomization
@@ -40,9 +50,15 @@ from firmware_like.world_file import load_world
 from ramp.autonomy.config import AutonomyConfig
 from ramp.autonomy.executive.autonomy import Autonomy
 from ramp.autonomy.executive.kit import Detect, Localize
+from ramp.clock import Clock
+from ramp.scheduler import Scheduler
 from ramp.simulation.backend import SimBackend
 from ramp.simulation.rig import Rig, load_autonomy_config
 from ramp.statemachine import StateChange
+
+if TYPE_CHECKING:
+    from ramp.autonomy.perception.stack import Perception
+    from ramp.simulation.arena_process import ArenaProcess, MirroredWorld, TickLog
 
 log = logging.getLogger("ramp.sim.mission")
 
@@ -68,6 +84,9 @@ class MissionOptions:
     realtime: bool = False
     port: int = 0  # with realtime: where the backend serves MCP
     randomize: bool = False  # the seed also draws the robot's physics and calibration
+    #: With realtime: the backend and the simulator on the autonomy's loop, in this process
+    #: (realtime before issue 23; kept to measure the difference, `bench realtime`).
+    single_loop: bool = False
 
 
 @dataclass
@@ -112,7 +131,8 @@ class MissionRun:
         if not (math.isfinite(o.duration) and o.duration > 0):
             raise ValueError(f"duration {o.duration!r} must be a positive number of seconds")
         self.randomization = Randomization.draw(o.seed) if o.randomize else None
-        self.world = make_world(o, self.randomization)
+        #: The arena; with `realtime` (not `single_loop`), its mirror once built.
+        self.world: MarteWorld | MirroredWorld = make_world(o, self.randomization)
         self.config = mission_config(load_autonomy_config(o.config), o.duration)
         self.error = ""
         self.stop_requested = False  # `request_stop()`: end the run at the next tick
@@ -122,24 +142,76 @@ class MissionRun:
         self.backend: SimBackend | None = None
         self.rig: Rig | None = None
         self.autonomy: Autonomy | None = None
+        #: The autonomy's clock and scheduler (the rig's, unless the arena has a process).
+        self.clock: Clock | None = None
+        self.scheduler: Scheduler | None = None
+        #: Where the backend serves MCP, once built.
+        self.mcp_address: tuple[str, int] = ("", 0)
+        #: With `realtime`: the simulator's process, and the backend's tick figures.
+        self.arena: ArenaProcess | None = None
+        self.perception: Perception | None = None  # with the arena apart: the autonomy's
+        self.backend_ticks: dict[str, Any] | None = None
+        self._tick_log: TickLog | None = None
 
     # -- the run ---------------------------------------------------------------------------------
     def build(self) -> None:
         o = self.options
+        if o.realtime and not o.single_loop:
+            self._build_apart()
+            return
         clock = None
         if o.realtime:
             from ramp.clock import MonotonicClock
 
             clock = MonotonicClock()
+        assert isinstance(self.world, MarteWorld)
         self.backend = SimBackend(self.world, clock=clock, port=o.port)
+        if o.realtime:
+            from ramp.simulation.arena_process import TickLog
+
+            self._tick_log = TickLog(self.backend.scheduler)
         self.rig = Rig(self.world, self.config, seed=o.seed, fault=o.fault,
                        run_length_s=o.duration, backend=self.backend, stream=False,
                        randomization=self.randomization)
+        self.clock, self.scheduler = self.rig.clock, self.rig.scheduler
+        self.mcp_address = self.backend.address
         self.autonomy = Autonomy(self.rig.scheduler, self.rig.perception, self.config,
                                  self.backend.address, localize=self.localize,
                                  detect=self.detect)
         self.autonomy.mission.add_listener(self._changed)
         self.rig.scheduler.add_task("sim.trace", TRACE_HZ, self._sample)
+
+    def _build_apart(self) -> None:
+        """The robot and the arena in their own process; the autonomy here, on its own
+        scheduler and the wall clock, as `ramp-autonomy` runs on the robot."""
+        from dataclasses import replace
+
+        from ramp.autonomy.hal.hokuyo import HokuyoLidar
+        from ramp.autonomy.hal.simlink import SimLinkImu, SimLinkPanTilt
+        from ramp.autonomy.perception.stack import Perception
+        from ramp.clock import MonotonicClock
+        from ramp.simulation.arena_process import ArenaProcess, MirroredWorld
+
+        assert isinstance(self.world, MarteWorld)
+        self.arena = arena = ArenaProcess(self.options)
+        self.world = MirroredWorld(self.world)
+        self.clock = clock = MonotonicClock()
+        self.scheduler = scheduler = Scheduler(clock, 100.0)
+        self.mcp_address = arena.mcp_address
+        arena.on_truth = self._truth
+        arena.on_lost = self._arena_lost
+        arena.attach(scheduler)
+        cfg = self.config
+        now = clock.now()
+        lidar = HokuyoLidar(arena.lidar_url, clock=clock, loop=scheduler)
+        imu = SimLinkImu(replace(cfg.imu, driver="simlink"), link=arena.link)
+        pan_tilt = SimLinkPanTilt(replace(cfg.gimbal, driver="simlink"), link=arena.link)
+        self.perception = Perception(cfg, lidar, imu, pan_tilt, now=now)
+        self.perception.add_tasks(scheduler)
+        self.perception.start(now, stream=False)
+        self.autonomy = Autonomy(scheduler, self.perception, cfg, arena.mcp_address,
+                                 localize=self.localize, detect=self.detect)
+        self.autonomy.mission.add_listener(self._changed)
 
     def run(self) -> dict[str, Any]:
         """Run to the end; the summary. Exceptions end the run as `error`."""
@@ -147,12 +219,13 @@ class MissionRun:
         try:
             if self.autonomy is None:
                 self.build()
-            assert self.rig is not None and self.autonomy is not None
+            assert self.clock is not None and self.scheduler is not None
+            assert self.autonomy is not None
             if self.trace_file is not None:
                 header = {**self.world.describe(), "seed": self.options.seed,
                           "fault": self.options.fault, "duration": self.options.duration}
                 self.trace_file.write(json.dumps(header) + "\n")
-            clock = self.rig.clock
+            clock = self.clock
             self.started_at = clock.now()
             self._notify("started")
             self.autonomy.start(self.started_at)
@@ -164,18 +237,21 @@ class MissionRun:
                 return (mission.over or self.stop_requested or clock.now() >= end
                         or (waiting_ends and mission.state == "waiting_for_operator"))
 
-            self.rig.scheduler.run(over)
+            self.scheduler.run(over)
             self.ended_at = clock.now()
-            self.rig.run_for(0.5)  # the last stop reaches the wheels, the trace shows it
+            if self.arena is None or not self.arena_lost:
+                # The last stop reaches the wheels, the trace shows it.
+                self.scheduler.run_for(0.5)
         except KeyboardInterrupt:  # Ctrl-C (or SIGTERM, see the CLI) ends a --realtime run
             self.error = "interrupted"
-            if self.rig is not None:
-                self.ended_at = self.rig.clock.now()
+            if self.clock is not None:
+                self.ended_at = self.clock.now()
+            self._stop_robot()
         except Exception as exc:  # noqa: BLE001 - the run's outcome, reported as `error`
             log.exception("mission run failed")
             self.error = f"{type(exc).__name__}: {exc}"
-            if math.isnan(self.ended_at) and self.rig is not None:
-                self.ended_at = self.rig.clock.now()
+            if math.isnan(self.ended_at) and self.clock is not None:
+                self.ended_at = self.clock.now()
         finally:
             self.wall_s = time.perf_counter() - wall0
             self._notify("finished")
@@ -187,12 +263,47 @@ class MissionRun:
         self.stop_requested = True
 
     def close(self) -> None:
+        if self._tick_log is not None:
+            self.backend_ticks = self._tick_log.report()
+            self._tick_log = None
         if self.autonomy is not None:
             self.autonomy.close()
         if self.rig is not None:
             self.rig.close()
         elif self.backend is not None:
             self.backend.close()
+        if self.arena is not None:
+            if self.perception is not None:
+                self.perception.close()
+            end = self.arena.finish()  # the child stops every motor and ends
+            if end is not None:
+                self._truth(end, sample=False)
+                self.backend_ticks = end.get("backend")
+
+    @property
+    def arena_lost(self) -> bool:
+        """The simulator's process ended before the run did (the run is an `error`)."""
+        return self.arena is not None and bool(self.error) and self.error != "interrupted"
+
+    def _arena_lost(self, why: str) -> None:
+        log.error("%s", why)
+        if not self.error:
+            self.error = why
+        self.request_stop()
+
+    def _stop_robot(self) -> None:
+        """Interrupted: stop the robot over MCP before the link goes (the backend stops
+        every motor at its shutdown too; this says so first, as `ramp-autonomy` does)."""
+        autonomy = self.autonomy
+        if autonomy is None or self.scheduler is None or self.clock is None:
+            return
+        try:
+            if autonomy.mission.has_control:
+                autonomy.robot.stop_all()
+            end = self.clock.now() + 0.3
+            self.scheduler.run(lambda: self.clock is None or self.clock.now() >= end)
+        except KeyboardInterrupt:
+            pass  # a second Ctrl-C: close at once
 
     # -- what it says --------------------------------------------------------------------------
     @property
@@ -244,6 +355,11 @@ class MissionRun:
         }
         if self.randomization is not None:
             doc["randomized"] = self.randomization.as_dict()
+        if o.realtime:
+            doc["processes"] = {"autonomy": os.getpid(),
+                                "backend": self.arena.pid if self.arena else os.getpid()}
+            if self.backend_ticks is not None:
+                doc["backend_tick"] = self.backend_ticks
         if self.error:
             doc["error"] = self.error
         return doc
@@ -264,6 +380,15 @@ class MissionRun:
             fn = getattr(observer, hook, None)
             if fn is not None:
                 fn(self, *args)
+
+    def _truth(self, msg: dict[str, Any], sample: bool = True) -> None:
+        """The child's truth (10 Hz, and its last at the end): the mirror, a trace line."""
+        from ramp.simulation.arena_process import MirroredWorld
+
+        assert isinstance(self.world, MirroredWorld)
+        self.world.update(msg)
+        if sample and self.clock is not None and math.isfinite(self.started_at):
+            self._sample(self.clock.now(), 0.0)
 
     def _sample(self, now: float, dt: float) -> None:
         w = self.world

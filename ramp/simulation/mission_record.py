@@ -69,9 +69,9 @@ class MissionRecorder:
 
     # -- MissionRun's hooks ---------------------------------------------------------------------
     def started(self, run: MissionRun) -> None:
-        assert run.rig is not None and run.autonomy is not None
+        assert run.clock is not None and run.autonomy is not None
         self.view = AutonomyView.watching(self.sink, run.autonomy)
-        self.start(run.rig.clock.now())
+        self.start(run.clock.now())
 
     def changed(self, run: MissionRun, change: StateChange) -> None:
         pass  # the view has the mission's own listener

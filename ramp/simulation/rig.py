@@ -21,6 +21,10 @@ config's `lidar.mount` and `gimbal.pivot` (`ramp.autonomy.mount.lidar_pose`), so
 never disagree; `autonomy.yaml` carries the simulator's mount (0.40, 0, 0.70) m
 (`firmware_like/arena_params.py`), and a test checks both ways.
 
+The simulator's side is `SimSensors`, on its own: `ramp sim mission --realtime` runs it in
+the simulator's process and serves it to the autonomy's process over the sensor link
+(`ramp.simulation.arena_process`).
+
 **A backend** (`ramp.simulation.backend.SimBackend`) can be attached: the supervisor with its
 sim backplane moving the same world on the same clock and scheduler, serving MCP on a loopback
 port. The mission adds its MCP link (`ramp.autonomy.mcp_link.McpLink`) to `rig.scheduler`
@@ -97,6 +101,122 @@ class ImuTruthAdapter:
         self.accel_body = t.linear_acceleration
 
 
+class SimSensors:
+    """The simulator's side of a rig: the Hokuyo emulator with its ray-caster, the IMU and
+    gimbal emulators (and the world's step, unless a backend steps it), as tasks on
+    `scheduler`. `Rig` puts the autonomy's drivers on them in the same process; in
+    `ramp sim mission --realtime` the simulator's process serves them to the autonomy's
+    process over the sensor link (`ramp.simulation.arena_process`)."""
+
+    def __init__(self, world: MarteWorld, config: AutonomyConfig, scheduler: Scheduler, *,
+                 seed: int = 0, fault: str = "none", run_length_s: float = 600.0,
+                 shift_window_s: tuple[float, float] | None = None,
+                 backend: SimBackend | None = None,
+                 randomization: Randomization | None = None) -> None:
+        if fault not in FAULTS:
+            raise ValueError(f"unknown fault {fault!r} (expected one of: {', '.join(FAULTS)})")
+        self.world = world
+        self.config = config
+        self.scheduler = scheduler
+        self.clock: Clock = scheduler.clock
+        self._tasks: list[ScheduledTask] = []
+        rate = scheduler.rate_hz
+        cfg = config
+        if backend is None or not backend.steps_world:
+            self._tasks.append(scheduler.add_task("sim.world", rate, self._step_world))
+        self.gimbal_emulator: PanTiltEmulator = gimbal_emulator(self.clock, cfg.gimbal)
+        m = cfg.lidar.mount
+        true_mount = replace(LidarParams(), mount_x=m.x, mount_y=m.y, mount_z=m.z)
+        imu_model = None
+        if randomization is not None:  # the true mount and gyro; the autonomy keeps its own
+            true_mount = randomization.lidar_params(true_mount)
+            imu_model = randomization.imu_model()
+        self.view = LidarView.of(world, true_mount, seed=seed)
+        self._gimbal_times: deque[float] = deque()
+        self._gimbal_angles: deque[tuple[float, float]] = deque()
+        self.lidar_emulator = HokuyoEmulator(self.clock, self.range_source, port=0)
+        self.lidar_emulator.attach(scheduler)
+        self._tasks.append(scheduler.add_task("sim.lidar", rate, self._service_lidar))
+        window = shift_window_s if shift_window_s is not None else shift_window(run_length_s)
+        self.imu_emulator = ImuEmulator(self.clock, lambda: ImuTruthAdapter(world), seed=seed,
+                                        fault=fault, data_interval_ms=cfg.imu.data_interval_ms,
+                                        mount=cfg.imu.mount, shift_window_s=window,
+                                        model=imu_model)
+        #: `sim:lidar.blind=(1)`: every beam returns nothing.
+        self.lidar_blind = False
+        if backend is not None:
+            backend.sim_module.add_sensor_faults(self._set_blind, self.imu_emulator.shift_now)
+        self.closed = False
+
+    # -- the truth ------------------------------------------------------------------------------
+    def true_lidar_pose(self, at: float | None = None) -> LidarPose:
+        """The scanner's real pose in the arena: the chassis as the world has it, the gimbal
+        as the servo horns stood at clock time `at` (now when None), the mount and pivot of
+        the config."""
+        pan, tilt = self.gimbal_emulator.angles() if at is None else self._gimbal_at(at)
+        position, rotation = lidar_pose(self.config.lidar.mount, self.config.gimbal.pivot,
+                                        pan, tilt)
+        c = self.world.chassis_pose()
+        chassis = rotation_zyx(c.yaw, c.pitch, c.roll)
+        origin = np.array([c.x, c.y, c.z]) + chassis @ np.asarray(position)
+        return LidarPose(origin, chassis @ np.asarray(rotation), math.radians(pan),
+                         math.radians(tilt))
+
+    def range_source(self, t: float) -> npt.NDArray[np.int64]:
+        """The Hokuyo emulator's feed for the scan that started at `t`: one scan in
+        millimetres, cast with the gimbal where it stood when the beam ahead was measured (the
+        emulator asks once the scan is complete, up to a tick later; a sweeping gimbal moves
+        meanwhile) and the chassis as it is now (it moves millimetres in that time)."""
+        if self.lidar_blind:
+            return np.full(self.view.params.steps, self.view.params.no_return_mm,
+                           dtype=np.int64)
+        front = t + FRONT_STEP_DELAY_S
+        return self.view.scan(self.true_lidar_pose(front), digging=self.world.digging).mm
+
+    def _gimbal_at(self, t: float) -> tuple[float, float]:
+        """The horns' angles at clock time `t`, from the history kept."""
+        now = self.gimbal_emulator.angles()
+        times, angles = self._gimbal_times, self._gimbal_angles
+        if not times or t >= self.clock.now():
+            return now
+        i = bisect.bisect_right(times, t)
+        if i == 0:
+            return angles[0]
+        t0, a = times[i - 1], angles[i - 1]
+        t1, b = (times[i], angles[i]) if i < len(times) else (self.clock.now(), now)
+        f = (t - t0) / (t1 - t0) if t1 > t0 else 1.0
+        return (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]))
+
+    def _set_blind(self, on: bool) -> None:
+        self.lidar_blind = on
+
+    def stop_tasks(self) -> None:
+        """Take the tasks off the scheduler (the emulators stay as they are)."""
+        for task in self._tasks:
+            self.scheduler.remove_task(task)
+        self._tasks.clear()
+
+    def close(self) -> None:
+        """Remove the tasks and close the Hokuyo emulator's port; idempotent."""
+        if self.closed:
+            return
+        self.closed = True
+        self.stop_tasks()
+        self.lidar_emulator.close()
+
+    # -- tasks ----------------------------------------------------------------------------------
+    def _step_world(self, now: float, dt: float) -> None:
+        self.world.step(dt)
+
+    def _service_lidar(self, now: float, dt: float) -> None:
+        self._gimbal_times.append(now)
+        self._gimbal_angles.append(self.gimbal_emulator.angles())
+        if len(self._gimbal_times) > GIMBAL_HISTORY:
+            self._gimbal_times.popleft()
+            self._gimbal_angles.popleft()
+        self.lidar_emulator.service(now)
+
+
 class Rig:
     """World + emulators + the autonomy's drivers and perception tasks, ready to run."""
 
@@ -121,30 +241,15 @@ class Rig:
             self.scheduler = Scheduler(self.clock, rate_hz)
         now = self.clock.now()
         self.started_at = now
-        self._tasks: list[ScheduledTask] = []
-        rate = self.scheduler.rate_hz
         cfg = self.config
         # -- the simulator's side ---------------------------------------------------------
-        if backend is None or not backend.steps_world:
-            self._tasks.append(self.scheduler.add_task("sim.world", rate, self._step_world))
-        self.gimbal_emulator: PanTiltEmulator = gimbal_emulator(self.clock, cfg.gimbal)
-        m = cfg.lidar.mount
-        true_mount = replace(LidarParams(), mount_x=m.x, mount_y=m.y, mount_z=m.z)
-        imu_model = None
-        if randomization is not None:  # the true mount and gyro; the autonomy keeps its own
-            true_mount = randomization.lidar_params(true_mount)
-            imu_model = randomization.imu_model()
-        self.view = LidarView.of(world, true_mount, seed=seed)
-        self._gimbal_times: deque[float] = deque()
-        self._gimbal_angles: deque[tuple[float, float]] = deque()
-        self.lidar_emulator = HokuyoEmulator(self.clock, self.range_source, port=0)
-        self.lidar_emulator.attach(self.scheduler)
-        self._tasks.append(self.scheduler.add_task("sim.lidar", rate, self._service_lidar))
-        window = shift_window_s if shift_window_s is not None else shift_window(run_length_s)
-        self.imu_emulator = ImuEmulator(self.clock, lambda: ImuTruthAdapter(world), seed=seed,
-                                        fault=fault, data_interval_ms=cfg.imu.data_interval_ms,
-                                        mount=cfg.imu.mount, shift_window_s=window,
-                                        model=imu_model)
+        self.sensors = SimSensors(world, cfg, self.scheduler, seed=seed, fault=fault,
+                                  run_length_s=run_length_s, shift_window_s=shift_window_s,
+                                  backend=backend, randomization=randomization)
+        self.gimbal_emulator = self.sensors.gimbal_emulator
+        self.lidar_emulator = self.sensors.lidar_emulator
+        self.imu_emulator = self.sensors.imu_emulator
+        self.view = self.sensors.view
         # -- the autonomy's side ------------------------------------------------------------
         imu = driver_class("imu", "sim")(replace(cfg.imu, driver="sim"),
                                          emulator=self.imu_emulator)
@@ -154,10 +259,6 @@ class Rig:
         self.perception = Perception(cfg, lidar, imu, pan_tilt, now=now)
         self.perception.add_tasks(self.scheduler)
         self.perception.start(now, stream=stream)
-        #: `sim:lidar.blind=(1)`: every beam returns nothing.
-        self.lidar_blind = False
-        if backend is not None:
-            backend.sim_module.add_sensor_faults(self._set_blind, self.imu_emulator.shift_now)
         self.closed = False
 
     # -- shortcuts ------------------------------------------------------------------------------
@@ -196,47 +297,23 @@ class Rig:
         """Seconds since the rig was built."""
         return self.clock.now() - self.started_at
 
+    @property
+    def lidar_blind(self) -> bool:
+        """`sim:lidar.blind=(1)`: every beam returns nothing."""
+        return self.sensors.lidar_blind
+
+    @lidar_blind.setter
+    def lidar_blind(self, on: bool) -> None:
+        self.sensors.lidar_blind = on
+
     # -- the truth ------------------------------------------------------------------------------
     def true_lidar_pose(self, at: float | None = None) -> LidarPose:
-        """The scanner's real pose in the arena: the chassis as the world has it, the gimbal
-        as the servo horns stood at clock time `at` (now when None), the mount and pivot of
-        the config."""
-        pan, tilt = self.gimbal_emulator.angles() if at is None else self._gimbal_at(at)
-        position, rotation = lidar_pose(self.config.lidar.mount, self.config.gimbal.pivot,
-                                        pan, tilt)
-        c = self.world.chassis_pose()
-        chassis = rotation_zyx(c.yaw, c.pitch, c.roll)
-        origin = np.array([c.x, c.y, c.z]) + chassis @ np.asarray(position)
-        return LidarPose(origin, chassis @ np.asarray(rotation), math.radians(pan),
-                         math.radians(tilt))
+        """The scanner's real pose in the arena (`SimSensors.true_lidar_pose`)."""
+        return self.sensors.true_lidar_pose(at)
 
     def range_source(self, t: float) -> npt.NDArray[np.int64]:
-        """The Hokuyo emulator's feed for the scan that started at `t`: one scan in
-        millimetres, cast with the gimbal where it stood when the beam ahead was measured (the
-        emulator asks once the scan is complete, up to a tick later; a sweeping gimbal moves
-        meanwhile) and the chassis as it is now (it moves millimetres in that time)."""
-        if self.lidar_blind:
-            return np.full(self.view.params.steps, self.view.params.no_return_mm,
-                           dtype=np.int64)
-        front = t + FRONT_STEP_DELAY_S
-        return self.view.scan(self.true_lidar_pose(front), digging=self.world.digging).mm
-
-    def _gimbal_at(self, t: float) -> tuple[float, float]:
-        """The horns' angles at clock time `t`, from the history the rig keeps."""
-        now = self.gimbal_emulator.angles()
-        times, angles = self._gimbal_times, self._gimbal_angles
-        if not times or t >= self.clock.now():
-            return now
-        i = bisect.bisect_right(times, t)
-        if i == 0:
-            return angles[0]
-        t0, a = times[i - 1], angles[i - 1]
-        t1, b = (times[i], angles[i]) if i < len(times) else (self.clock.now(), now)
-        f = (t - t0) / (t1 - t0) if t1 > t0 else 1.0
-        return (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]))
-
-    def _set_blind(self, on: bool) -> None:
-        self.lidar_blind = on
+        """The Hokuyo emulator's feed (`SimSensors.range_source`)."""
+        return self.sensors.range_source(t)
 
     # -- running --------------------------------------------------------------------------------
     def run_for(self, seconds: float) -> None:
@@ -253,10 +330,9 @@ class Rig:
         if self.closed:
             return
         self.closed = True
-        for task in self._tasks:
-            self.scheduler.remove_task(task)
+        self.sensors.stop_tasks()
         self.perception.close()
-        self.lidar_emulator.close()
+        self.sensors.close()
         if self.backend is not None:
             self.backend.close()
 
@@ -265,15 +341,3 @@ class Rig:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-    # -- tasks ----------------------------------------------------------------------------------
-    def _step_world(self, now: float, dt: float) -> None:
-        self.world.step(dt)
-
-    def _service_lidar(self, now: float, dt: float) -> None:
-        self._gimbal_times.append(now)
-        self._gimbal_angles.append(self.gimbal_emulator.angles())
-        if len(self._gimbal_times) > GIMBAL_HISTORY:
-            self._gimbal_times.popleft()
-            self._gimbal_angles.popleft()
-        self.lidar_emulator.service(now)

@@ -184,6 +184,7 @@ def test_the_same_arguments_give_the_same_run() -> None:
     (["--duration", "1e308"], "--duration: expected a positive number"),
     (["--seed", "-1"], "--seed: expected a whole number"),
     (["--port", "5577"], "--port: only with --realtime"),
+    (["--single-loop"], "--single-loop: only with --realtime"),
     (["--fault", "wobble"], "invalid choice"),
 ])
 def test_bad_arguments_exit_2_saying_what_was_expected(

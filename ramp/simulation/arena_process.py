@@ -1,0 +1,451 @@
+"""`ramp sim mission --realtime`: the robot and the arena in a process of their own.
+
+On the robot the backend and the autonomy are separate processes on separate loops; in one
+process on one loop, the autonomy's heavy work (a 3D scan's detection, a localization, a
+plan: tens to hundreds of milliseconds) made the backend's 100 Hz tick late by as much and
+stalled it past its limit (issue 23). So on the wall clock the simulator runs here, in a
+child process on its own scheduler and `MonotonicClock` -- the world, the backend (a real
+`Supervisor` whose sim backplane steps the world, serving MCP on its port), the Hokuyo
+emulator on loopback TCP, the IMU and gimbal emulators (`ramp.simulation.rig.SimSensors`)
+and the `sim` module -- and the parent (`ramp.simulation.mission.MissionRun`) keeps the
+autonomy exactly as `ramp-autonomy` runs it on the robot, with the trace, the summary and
+the observers. The virtual-time run stays one process on one scheduler, deterministic.
+
+Between them: MCP over TCP and SCIP over TCP, as on the robot, and the **sensor link**
+(`ramp.autonomy.hal.simlink`), a socketpair serviced as a reader on each side's loop,
+carrying
+
+- the IMU emulator's samples and the gimbal emulator's positions and target-reached events
+  to the autonomy's `SimLinkImu` / `SimLinkPanTilt` drivers, and their commands back
+  (`SensorServer`);
+- `ready` (the MCP address, the Hokuyo's, the child's pid) once the child serves, `truth`
+  at 10 Hz (the world's t, x, y, yaw, lift, bin, delivered, the referee's counts and logs)
+  for the trace and the observers (`MirroredWorld`), and `end` (the same, and the backend's
+  tick lateness over the whole run, `TickLog`) when the parent says `stop`.
+
+Lifetime: the child runs until the parent says `stop` or the link closes (the parent died:
+its end of the socketpair closes with it), then sends `end`, stops every motor
+(`Supervisor.shutdown`) and closes its ports. It starts in a session of its own, so a Ctrl-C
+in the terminal reaches only the parent, which stops the robot and ends the child; a child
+that dies closes the link and the parent ends the run as `error`, saying so.
+
+    python -m ramp.simulation.arena_process --link-fd N --options JSON   (the parent runs it)
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import logging
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import asdict
+from typing import TYPE_CHECKING, Any
+
+from ramp.autonomy.hal.simlink import Message, SensorLink, sample_row
+from ramp.scheduler import Scheduler
+
+if TYPE_CHECKING:
+    from firmware_like.imu import ImuEmulator
+    from firmware_like.marte import MarteWorld
+    from firmware_like.servo import PanTiltEmulator
+    from ramp.simulation.mission import MissionOptions
+
+log = logging.getLogger("ramp.sim.arena")
+
+TRUTH_HZ = 10.0  # the trace's rate (SPEC 6.3)
+READY_TIMEOUT_S = 60.0  # the child imports numpy, builds the world, opens the buses
+END_TIMEOUT_S = 10.0  # for the child's `end` once told to stop
+EXIT_TIMEOUT_S = 10.0  # then for it to exit, before SIGTERM, then SIGKILL
+HISTOGRAM_US = 10.0  # lateness is counted in bins this wide
+
+
+class ArenaError(RuntimeError):
+    """The simulator's process could not start, or ended when it should not have."""
+
+
+# -- the backend's tick, measured in its own process ---------------------------------------
+class TickLog:
+    """Every tick's lateness over the whole run, counted as the scheduler's `TickStats`
+    counts it (a tick's start, and a deadline that passed while a task still ran), through
+    the loop's own hooks, in a histogram of `HISTOGRAM_US` bins: `TickStats` keeps only
+    the last minute, and a run's first minute holds its 3D scan."""
+
+    def __init__(self, scheduler: Scheduler) -> None:
+        self.scheduler = scheduler
+        self.bins: Counter[int] = Counter()
+        self.count = 0
+        self.max_us = 0.0
+        self._next = math.inf
+        self._chain_tick = scheduler.on_tick
+        self._chain_done = scheduler.on_tick_done
+        scheduler.on_tick = self.tick
+        scheduler.on_tick_done = self.tick_done
+
+    def _add(self, us: float) -> None:
+        self.bins[int(us // HISTOGRAM_US)] += 1
+        self.count += 1
+        self.max_us = max(self.max_us, us)
+
+    def tick(self, now: float, late_s: float) -> None:
+        self._add(late_s * 1e6)
+        period = self.scheduler.period
+        self._next = now - late_s + (1 + int(late_s // period)) * period
+        if self._chain_tick is not None:
+            self._chain_tick(now, late_s)
+
+    def tick_done(self, now: float, busy_s: float) -> None:
+        after = now + busy_s
+        if after > self._next:
+            self._add((after - self._next) * 1e6)
+        if self._chain_done is not None:
+            self._chain_done(now, busy_s)
+
+    def percentile_us(self, q: float) -> float:
+        """The nearest-rank percentile (the scheduler's rule), to the bin's upper edge."""
+        if not self.count:
+            return 0.0
+        rank = min(self.count - 1, int(q * self.count))
+        seen = 0
+        for b in sorted(self.bins):
+            seen += self.bins[b]
+            if seen > rank:
+                return min(self.max_us, (b + 1) * HISTOGRAM_US)
+        return self.max_us
+
+    def report(self) -> dict[str, Any]:
+        """Figures for the summary: lateness in µs, stalls and overruns since the start."""
+        s = self.scheduler
+        return {"pid": os.getpid(), "samples": self.count,
+                "late_us": {"p50": round(self.percentile_us(0.50)),
+                            "p99": round(self.percentile_us(0.99)),
+                            "max": round(self.max_us)},
+                "stalls": s.stalls, "overruns": s.stats.overruns, "skipped": s.stats.skipped,
+                "last_overrun": s.stats.last_overrun_task}
+
+
+# -- the simulator's side ------------------------------------------------------------------
+class SensorServer:
+    """The IMU and gimbal emulators served over the sensor link: their samples, positions
+    and target-reached events out every tick, the drivers' commands in."""
+
+    def __init__(self, link: SensorLink, imu: ImuEmulator, gimbal: PanTiltEmulator) -> None:
+        self.link = link
+        self.imu = imu
+        self.gimbal = gimbal
+        self.imu_open = False
+        link.on("imu.open", self._imu_open)
+        link.on("imu.close", self._imu_close)
+        link.on("imu.interval", lambda m: imu.set_data_interval(int(m["ms"])))
+        link.on("imu.zero", lambda m: imu.zero_gyro())
+        link.on("servo", self._servo)
+
+    def _imu_open(self, msg: Message) -> None:
+        self.imu.poll()  # what was measured while nobody listened is gone
+        self.imu_open = True
+
+    def _imu_close(self, msg: Message) -> None:
+        self.imu_open = False
+
+    def _servo(self, msg: Message) -> None:
+        if not self.gimbal.attached:
+            return  # the board is unplugged: the command goes nowhere, as over USB
+        axis, op, value = msg["axis"], msg["op"], msg["v"]
+        if axis not in ("pan", "tilt"):
+            raise ValueError(f"servo axis {axis!r}: expected pan or tilt")
+        channel = self.gimbal.pan if axis == "pan" else self.gimbal.tilt
+        if op == "target":
+            channel.set_target(float(value))
+        elif op == "velocity":
+            channel.set_velocity_limit(float(value))
+        elif op == "acceleration":
+            channel.set_acceleration(float(value))
+        elif op == "engaged":
+            channel.set_engaged(bool(value))
+        else:
+            raise ValueError(f"servo op {op!r}: expected target, velocity, acceleration, "
+                             "engaged")
+
+    def tick(self, now: float, dt: float) -> None:
+        imu, g = self.imu, self.gimbal
+        if self.imu_open:
+            samples = imu.poll() if imu.attached else []
+            self.link.send("imu", attached=imu.attached, s=[sample_row(s) for s in samples])
+        if g.attached:
+            pos = [g.pan.position_deg, g.tilt.position_deg]
+            reached = [g.pan.take_reached(), g.tilt.take_reached()]
+        else:
+            pos, reached = [None, None], [[], []]
+        self.link.send("gimbal", attached=g.attached, pos=pos, reached=reached)
+
+
+def truth_of(world: MarteWorld) -> dict[str, Any]:
+    """What the parent's trace, observers and summary read of the world."""
+    return {"t": world.time, "x": world.x, "y": world.y, "yaw": world.yaw,
+            "lift": world.lift_pos, "bin_kg": world.bin_kg,
+            "delivered_kg": world.delivered_kg, "spilled_kg": world.spilled_kg,
+            "excavated_kg": world.excavated_kg, "collisions": world.collisions,
+            "crater_entries": world.crater_entries}
+
+
+class Arena:
+    """The child's whole run: the world, the backend, the sensors and the link server on
+    one scheduler and the wall clock, until `stop` or the link closes."""
+
+    def __init__(self, options: MissionOptions, link: SensorLink) -> None:
+        from firmware_like.randomize import Randomization
+        from ramp.clock import MonotonicClock
+        from ramp.simulation.backend import SimBackend
+        from ramp.simulation.mission import make_world, mission_config
+        from ramp.simulation.rig import SimSensors, load_autonomy_config
+
+        o = options
+        self.link = link
+        self.stopping = ""
+        randomization = Randomization.draw(o.seed) if o.randomize else None
+        self.world = make_world(o, randomization)
+        config = mission_config(load_autonomy_config(o.config), o.duration)
+        self.backend = SimBackend(self.world, clock=MonotonicClock(), port=o.port)
+        scheduler = self.backend.scheduler
+        self.ticks = TickLog(scheduler)
+        self.sensors = SimSensors(self.world, config, scheduler, seed=o.seed, fault=o.fault,
+                                  run_length_s=o.duration, backend=self.backend,
+                                  randomization=randomization)
+        self.server = SensorServer(link, self.sensors.imu_emulator,
+                                   self.sensors.gimbal_emulator)
+        self._logged = (0, 0)
+        link.on("stop", lambda m: self.stop("the autonomy's process asked"))
+        link.on_close.append(lambda why: self.stop(f"the sensor link closed: {why}"))
+        link.attach(scheduler)
+        scheduler.add_task("sim.link", scheduler.rate_hz, self.server.tick)
+        scheduler.add_task("sim.truth", TRUTH_HZ, self._truth)
+
+    def stop(self, why: str) -> None:
+        if not self.stopping:
+            self.stopping = why
+
+    def run(self) -> int:
+        host, port = self.backend.address
+        self.link.send("ready", pid=os.getpid(), mcp=[host, port],
+                       lidar=self.sensors.lidar_emulator.url)
+        try:
+            self.backend.scheduler.run(lambda: bool(self.stopping))
+            if self.link.connected:
+                self.link.send("end", why=self.stopping, backend=self.ticks.report(),
+                               **self._truth_fields(full=True))
+                self.link.drain(2.0)
+        finally:
+            self.close()
+        return 0
+
+    def close(self) -> None:
+        self.sensors.close()
+        self.backend.close()  # zeros on every wire, then the ports close
+        self.link.close()
+
+    def _truth_fields(self, full: bool = False) -> dict[str, Any]:
+        w = self.world
+        doc = truth_of(w)
+        logs = (len(w.collision_log), len(w.crater_log))
+        if full or logs != self._logged:
+            self._logged = logs
+            doc["collision_log"] = [[t, what] for t, what in w.collision_log]
+            doc["crater_log"] = [[t, what] for t, what in w.crater_log]
+        return doc
+
+    def _truth(self, now: float, dt: float) -> None:
+        self.link.send("truth", now=now, **self._truth_fields())
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """The child's entry point (the parent, `ArenaProcess`, runs it)."""
+    from ramp.simulation.mission import MissionOptions
+
+    parser = argparse.ArgumentParser(prog="python -m ramp.simulation.arena_process")
+    parser.add_argument("--link-fd", type=int, required=True)
+    parser.add_argument("--options", required=True, help="MissionOptions as JSON")
+    args = parser.parse_args(argv)
+    # The terminal's Ctrl-C is the parent's to handle (it stops the robot, then says stop);
+    # a SIGTERM sent here ends the run as `stop` does.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    logging.basicConfig(level=logging.ERROR, format="%(levelname)s %(name)s: %(message)s")
+    link = SensorLink(socket.socket(fileno=args.link_fd), name="sensor link (simulator)")
+    try:
+        arena = Arena(MissionOptions(**json.loads(args.options)), link)
+    except Exception as exc:  # noqa: BLE001 - said to the parent, which reports it
+        link.send("failed", error=f"{type(exc).__name__}: {exc}")
+        link.drain(2.0)
+        link.close()
+        return 1
+    signal.signal(signal.SIGTERM, lambda signum, frame: arena.stop("SIGTERM"))
+    return arena.run()
+
+
+# -- the autonomy's side (the parent) -------------------------------------------------------
+class MirroredWorld:
+    """What the parent knows of the child's world: the layout (`describe`, `layout`,
+    `start`), built from the same options as the child's, so the same; and the truth the
+    child sends at 10 Hz, under the world's own names."""
+
+    def __init__(self, layout_world: MarteWorld) -> None:
+        self.layout_world = layout_world
+        self.layout = layout_world.layout
+        self.start = layout_world.start
+        self.start_pose = layout_world.start_pose
+        self.time = 0.0
+        self.x, self.y, self.yaw = layout_world.x, layout_world.y, layout_world.yaw
+        self.lift_pos = layout_world.lift_pos
+        self.bin_kg = self.delivered_kg = self.spilled_kg = self.excavated_kg = 0.0
+        self.collisions = self.crater_entries = 0
+        self.collision_log: list[tuple[float, str]] = []
+        self.crater_log: list[tuple[float, str]] = []
+
+    @property
+    def heading_deg(self) -> float:
+        return math.degrees(self.yaw)
+
+    def describe(self) -> dict[str, object]:
+        return self.layout_world.describe()
+
+    def update(self, msg: Message) -> None:
+        self.time = float(msg["t"])
+        self.x, self.y, self.yaw = float(msg["x"]), float(msg["y"]), float(msg["yaw"])
+        self.lift_pos = float(msg["lift"])
+        self.bin_kg = float(msg["bin_kg"])
+        self.delivered_kg = float(msg["delivered_kg"])
+        self.spilled_kg = float(msg["spilled_kg"])
+        self.excavated_kg = float(msg["excavated_kg"])
+        self.collisions = int(msg["collisions"])
+        self.crater_entries = int(msg["crater_entries"])
+        if "collision_log" in msg:
+            self.collision_log = [(float(t), str(what)) for t, what in msg["collision_log"]]
+            self.crater_log = [(float(t), str(what)) for t, what in msg["crater_log"]]
+
+
+class ArenaProcess:
+    """The child, seen from the parent: started (and waited for) on construction, its link
+    serviced on the parent's scheduler once `attach`ed, ended by `finish` (idempotent)."""
+
+    def __init__(self, options: MissionOptions, *,
+                 ready_timeout_s: float = READY_TIMEOUT_S) -> None:
+        mine, theirs = socket.socketpair()
+        argv = [sys.executable, "-m", "ramp.simulation.arena_process",
+                "--link-fd", str(theirs.fileno()), "--options", json.dumps(asdict(options))]
+        self.proc = subprocess.Popen(argv, pass_fds=(theirs.fileno(),),
+                                     stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                     start_new_session=True)
+        theirs.close()  # the child's end: its death must close the link
+        self.pid = self.proc.pid
+        self.link = SensorLink(mine, name="sensor link (autonomy)")
+        self.ready: Message | None = None
+        self.ended: Message | None = None
+        self.failed = ""
+        self.finishing = False
+        self.on_truth: Callable[[Message], None] | None = None
+        self.on_lost: Callable[[str], None] | None = None
+        self.link.on("ready", self._ready)
+        self.link.on("failed", self._failed)
+        self.link.on("truth", self._truth)
+        self.link.on("end", self._end)
+        self.link.on_close.append(self._closed)
+        try:
+            self._wait_ready(ready_timeout_s)
+        except BaseException:
+            self.finish()
+            raise
+        mcp = self.ready["mcp"] if self.ready is not None else ("", 0)
+        self.mcp_address: tuple[str, int] = (str(mcp[0]), int(mcp[1]))
+        self.lidar_url = str(self.ready["lidar"]) if self.ready is not None else ""
+
+    def _wait_ready(self, timeout_s: float) -> None:
+        deadline = time.monotonic() + timeout_s
+        while self.ready is None:
+            if self.failed or self.link.closed:
+                raise ArenaError(f"the simulator's process could not start: "
+                                 f"{self.failed or self._exit_status()}")
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise ArenaError(f"the simulator's process (pid {self.pid}) was not ready "
+                                 f"within {timeout_s:g} s")
+            self.link.pump(min(left, 0.5))
+
+    def attach(self, loop: Scheduler) -> None:
+        """Service the link on the parent's scheduler from now on."""
+        self.link.attach(loop)
+
+    # -- the child's messages ----------------------------------------------------------------
+    def _ready(self, msg: Message) -> None:
+        self.ready = msg
+
+    def _failed(self, msg: Message) -> None:
+        self.failed = str(msg.get("error", "no reason given"))
+
+    def _truth(self, msg: Message) -> None:
+        if self.on_truth is not None:
+            self.on_truth(msg)
+
+    def _end(self, msg: Message) -> None:
+        self.ended = msg
+        if not self.finishing and self.on_lost is not None:
+            self.on_lost(f"the simulator's process (pid {self.pid}) ended the run: "
+                         f"{msg.get('why', '')}")
+
+    def _closed(self, why: str) -> None:
+        if self.finishing or self.ended is not None or self.ready is None:
+            return
+        if self.on_lost is not None:
+            self.on_lost(f"the simulator's process (pid {self.pid}) is gone "
+                         f"({self._exit_status()}); the sensor link: {why}")
+
+    def _exit_status(self, wait_s: float = 2.0) -> str:
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            self.proc.wait(wait_s)
+        code = self.proc.returncode
+        if code is None:
+            return "still running"
+        if code < 0:
+            return f"killed by {signal.Signals(-code).name}"
+        return f"exit status {code}"
+
+    # -- the end -----------------------------------------------------------------------------
+    def finish(self, end_timeout_s: float = END_TIMEOUT_S) -> Message | None:
+        """Tell the child to stop, take its `end` (the world's last truth and the backend's
+        figures), and see it exit: SIGTERM, then SIGKILL if it does not. Idempotent; the
+        `end` message, or None when the child could not send one."""
+        if not self.finishing:
+            self.finishing = True
+            if self.link.connected and self.ended is None:
+                self.link.send("stop")
+                deadline = time.monotonic() + end_timeout_s
+                while self.ended is None and self.link.connected \
+                        and time.monotonic() < deadline:
+                    self.link.pump(min(0.2, max(0.0, deadline - time.monotonic())))
+            self.link.close()
+        self._reap()
+        return self.ended
+
+    def _reap(self) -> None:
+        if self.proc.poll() is not None:
+            return
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            self.proc.wait(EXIT_TIMEOUT_S)
+            return
+        log.warning("the simulator's process (pid %d) did not exit: SIGTERM", self.pid)
+        self.proc.terminate()
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            self.proc.wait(5.0)
+            return
+        self.proc.kill()
+        self.proc.wait()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
