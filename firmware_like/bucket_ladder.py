@@ -146,8 +146,6 @@ class BucketLadderExcavator:
 
     def sample_noise(self, rng: random.Random) -> None:
         """Draw this step's sensor noise (after the chassis' draws, from the same stream)."""
-        p = self.params
-        self.noise = {
-            "ble.lift_pot": clipped_gauss(rng, p.pot_noise),
-            "ble.load_cell": clipped_gauss(rng, p.load_cell_noise),
-        }
+        p, noise = self.params, self.noise
+        noise["ble.lift_pot"] = clipped_gauss(rng, p.pot_noise)
+        noise["ble.load_cell"] = clipped_gauss(rng, p.load_cell_noise)

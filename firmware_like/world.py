@@ -12,8 +12,11 @@ is the config's module order.
 
 A part is any object with the methods of `ramp.hal.simio.SimWorld` it needs (`set_motor`,
 `read_analog`, `read_digital`, `write_digital`, `read_bridge`, `set_servo`, `read_servo`),
-`step(dt)`, and optionally `revision` (an int that moves on when its readings may change) and
-`bus_present(bus)`.
+`step(dt)`, and optionally `revision` (an int that moves on when its readings may change; an
+attribute the part has when it is added) and `bus_present(bus)`.
+
+The buses read a few signals on every tick, so a signal's owner, once found, is called
+directly, and `revision` sums only the parts that have one.
 """
 
 from __future__ import annotations
@@ -64,6 +67,7 @@ class World:
         self._owner: dict[str, Any] = {}
         self._unplugged: set[str] = set()
         self._own_revision = 0
+        self._revisioned: list[Any] = []  # the parts with a `revision` of their own
         #: Inputs the `sim` module holds at a value (`sim:input.set`): name -> quantity.
         self.overrides: dict[str, float] = {}
         for part in parts or []:
@@ -73,6 +77,8 @@ class World:
         """Add a part (once: a part shared by two modules is stepped once)."""
         if not any(p is part for p in self.parts):
             self.parts.append(part)
+            if hasattr(part, "revision"):
+                self._revisioned.append(part)
 
     def _route(self, method: str, name: str, *args: Any) -> Any:
         owner = self._owner.get(name)
@@ -94,32 +100,57 @@ class World:
         return getattr(self.plain, method)(name, *args)
 
     # -- the SimWorld protocol (ramp.hal.simio) ---------------------------------------------
+    # A signal's owner, once `_route` has found it, is called directly.
     def set_motor(self, name: str, duty: float) -> None:
-        self._route("set_motor", name, duty)
+        owner = self._owner.get(name)
+        if owner is None:
+            self._route("set_motor", name, duty)
+        else:
+            owner.set_motor(name, duty)
 
     def read_analog(self, name: str) -> float:
         if name in self.overrides:
             return float(self._overridden(name))
-        return float(self._route("read_analog", name))
+        owner = self._owner.get(name)
+        if owner is None:
+            return float(self._route("read_analog", name))
+        return float(owner.read_analog(name))
 
     def read_digital(self, name: str) -> bool:
         if name in self.overrides:
             return bool(self._overridden(name))
-        return bool(self._route("read_digital", name))
+        owner = self._owner.get(name)
+        if owner is None:
+            return bool(self._route("read_digital", name))
+        return bool(owner.read_digital(name))
 
     def write_digital(self, name: str, on: bool) -> None:
-        self._route("write_digital", name, on)
+        owner = self._owner.get(name)
+        if owner is None:
+            self._route("write_digital", name, on)
+        else:
+            owner.write_digital(name, on)
 
     def read_bridge(self, name: str) -> float:
         if name in self.overrides:
             return float(self._overridden(name))
-        return float(self._route("read_bridge", name))
+        owner = self._owner.get(name)
+        if owner is None:
+            return float(self._route("read_bridge", name))
+        return float(owner.read_bridge(name))
 
     def set_servo(self, name: str, target_deg: float | None, speed_dps: float) -> None:
-        self._route("set_servo", name, target_deg, speed_dps)
+        owner = self._owner.get(name)
+        if owner is None:
+            self._route("set_servo", name, target_deg, speed_dps)
+        else:
+            owner.set_servo(name, target_deg, speed_dps)
 
     def read_servo(self, name: str) -> float:
-        return float(self._route("read_servo", name))
+        owner = self._owner.get(name)
+        if owner is None:
+            return float(self._route("read_servo", name))
+        return float(owner.read_servo(name))
 
     def bus_present(self, bus: str) -> bool:
         if bus in self._unplugged:
@@ -129,7 +160,10 @@ class World:
     @property
     def revision(self) -> int:
         """Moves on whenever any part's readings may have changed."""
-        return self._own_revision + sum(int(getattr(p, "revision", 0)) for p in self.parts)
+        total = self._own_revision
+        for part in self._revisioned:
+            total += int(part.revision)
+        return total
 
     # -- the `sim` module's hooks (SPEC 12) -------------------------------------------------
     def set_input(self, name: str, quantity: float) -> None:
