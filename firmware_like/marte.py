@@ -148,6 +148,9 @@ class MarteWorld:
         self._outputs: dict[str, bool] = dict.fromkeys(DIGITAL_OUTPUTS, False)
         self._unplugged: set[str] = set()
         self._wheel_scale = dict(zip(WHEELS, p.wheel_speed_scale, strict=True))
+        # Two derived params (properties of the frozen params) the physics reads every piece.
+        self._free_speed = p.wheel_free_speed
+        self._capacity_c = p.battery_capacity_c
         #: The Bucket Ladder Excavator, a part of its own that this chassis carries and steps
         #: (`firmware_like.bucket_ladder`); the `ble` module's signals are its.
         self.ble = BucketLadderExcavator(self.params)
@@ -196,7 +199,8 @@ class MarteWorld:
 
     def set_motor(self, name: str, duty: float) -> None:
         """Command one motor; duty is clamped to -1..1 as a motor controller would."""
-        _known(name, "motor", MOTORS)
+        if name not in MOTORS:
+            _known(name, "motor", MOTORS)
         duty = float(duty)
         if not math.isfinite(duty):
             raise ValueError(f"duty for {name} must be finite, got {duty!r}")
@@ -514,7 +518,7 @@ class MarteWorld:
                                            self.pitch)
         # The mean ground speed of each side (`_wheel_ground_speed` written out), summed as
         # sum() over the side's wheels did (0.0 first, then in order).
-        sp, sc, free = self._speed, self._wheel_scale, p.wheel_free_speed
+        sp, sc, free = self._speed, self._wheel_scale, self._free_speed
         lf, lb = LEFT_WHEELS
         rf, rb = RIGHT_WHEELS
         left = (0.0 + _MOUNT[lf] * sp[lf] * free * sc[lf] + _MOUNT[lb] * sp[lb] * free * sc[lb]
@@ -598,14 +602,14 @@ class MarteWorld:
             current += abs(duty[name]) * amps
         current = self.ble.add_current(current)
         self.battery_current = current
-        self.battery_soc = max(0.0, self.battery_soc - current * dt / p.battery_capacity_c)
+        self.battery_soc = max(0.0, self.battery_soc - current * dt / self._capacity_c)
         ocv = self._ocv(self.battery_soc)
         self.battery_voltage = max(0.0, ocv - current * p.battery_r_internal)
 
     # ---- helpers ------------------------------------------------------------------------------
 
     def _wheel_ground_speed(self, name: str) -> float:
-        return (_MOUNT[name] * self._speed[name] * self.params.wheel_free_speed
+        return (_MOUNT[name] * self._speed[name] * self._free_speed
                 * self._wheel_scale[name])
 
     def _ocv(self, soc: float) -> float:
