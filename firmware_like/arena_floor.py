@@ -53,7 +53,7 @@ class ArenaFloor:
         self._wheels_clear = (math.hypot(hb, ht) + self._radius + self._half_w
                               + self.terrain.reach + 0.01)
         # What a chassis on bare ground gets, by the same expressions as `rest`.
-        self._bare_trapped = 0.0 >= arena.crater_trap_sink
+        self._bare_trapped = arena.crater_trap_sink <= 0.0
         self._bare_traction = 1.0 - (1.0 - arena.crater_slow_min) * max(0.0, 0.0) / (
             arena.crater_trap_sink)
 
