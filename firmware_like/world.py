@@ -12,11 +12,12 @@ is the config's module order.
 
 A part is any object with the methods of `ramp.hal.simio.SimWorld` it needs (`set_motor`,
 `read_analog`, `read_digital`, `write_digital`, `read_bridge`, `set_servo`, `read_servo`),
-`step(dt)`, and optionally `revision` (an int that moves on when its readings may change; an
-attribute the part has when it is added) and `bus_present(bus)`.
+`step(dt)`, and optionally `revision` (an int that moves on when its readings may change) and
+`bus_present(bus)`, each one the part has when it is added.
 
-The buses read a few signals on every tick, so a signal's owner, once found, is called
-directly, and `revision` sums only the parts that have one.
+The buses read a few signals and ask `revision` and `bus_present` on every tick, so a
+signal's owner, once found, is called directly, and the parts with a `revision` or a
+`bus_present` are listed when they are added.
 """
 
 from __future__ import annotations
@@ -68,6 +69,7 @@ class World:
         self._unplugged: set[str] = set()
         self._own_revision = 0
         self._revisioned: list[Any] = []  # the parts with a `revision` of their own
+        self._bus_watchers: list[Any] = []  # the parts with a `bus_present` of their own
         #: Inputs the `sim` module holds at a value (`sim:input.set`): name -> quantity.
         self.overrides: dict[str, float] = {}
         for part in parts or []:
@@ -79,6 +81,8 @@ class World:
             self.parts.append(part)
             if hasattr(part, "revision"):
                 self._revisioned.append(part)
+            if hasattr(part, "bus_present"):
+                self._bus_watchers.append(part)
 
     def _route(self, method: str, name: str, *args: Any) -> Any:
         owner = self._owner.get(name)
@@ -155,7 +159,10 @@ class World:
     def bus_present(self, bus: str) -> bool:
         if bus in self._unplugged:
             return False
-        return all(p.bus_present(bus) for p in self.parts if hasattr(p, "bus_present"))
+        for part in self._bus_watchers:  # noqa: SIM110 - a loop: all() over a generator is slower
+            if not part.bus_present(bus):
+                return False
+        return True
 
     @property
     def revision(self) -> int:
