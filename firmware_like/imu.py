@@ -324,15 +324,21 @@ class ImuEmulator:
         if self.fault == "gyro-drift":
             self._advance_drift(n[9:12])
         # force and rate in the board's axes (rot transposed), to g and deg/s, with the
-        # board's bias and noise, clipped at its ranges.
-        arange, anoise, abias = md.accel_range_g, md.accel_noise_g, self.accel_bias_g
-        accel_g = (
-            float(max(-arange, min(arange, PHIDGET_ACCEL_SIGN * (
-                m00 * f0 + m10 * f1 + m20 * f2) / GRAVITY_MPS2 + abias[0] + anoise * n[0]))),
-            float(max(-arange, min(arange, PHIDGET_ACCEL_SIGN * (
-                m01 * f0 + m11 * f1 + m21 * f2) / GRAVITY_MPS2 + abias[1] + anoise * n[1]))),
-            float(max(-arange, min(arange, PHIDGET_ACCEL_SIGN * (
-                m02 * f0 + m12 * f1 + m22 * f2) / GRAVITY_MPS2 + abias[2] + anoise * n[2]))))
+        # board's bias and noise, clipped at its ranges: `_clip` (max(-hi, min(hi, x))) as
+        # two comparisons, which pick the same value.
+        hi = float(md.accel_range_g)
+        lo = -hi
+        anoise, abias = md.accel_noise_g, self.accel_bias_g
+        x0 = PHIDGET_ACCEL_SIGN * (m00 * f0 + m10 * f1 + m20 * f2) / GRAVITY_MPS2 + abias[0] \
+            + anoise * n[0]
+        x1 = PHIDGET_ACCEL_SIGN * (m01 * f0 + m11 * f1 + m21 * f2) / GRAVITY_MPS2 + abias[1] \
+            + anoise * n[1]
+        x2 = PHIDGET_ACCEL_SIGN * (m02 * f0 + m12 * f1 + m22 * f2) / GRAVITY_MPS2 + abias[2] \
+            + anoise * n[2]
+        x0 = x0 if x0 < hi else hi
+        x1 = x1 if x1 < hi else hi
+        x2 = x2 if x2 < hi else hi
+        accel_g = (x0 if x0 > lo else lo, x1 if x1 > lo else lo, x2 if x2 > lo else lo)
         gnoise, gbias, drift = md.gyro_noise_dps, self.gyro_bias_dps, self._drift
         raw_gyro = [
             math.degrees(m00 * g0 + m10 * g1 + m20 * g2) + gbias[0] + drift[0] + gnoise * n[3],
@@ -340,10 +346,14 @@ class ImuEmulator:
             math.degrees(m02 * g0 + m12 * g1 + m22 * g2) + gbias[2] + drift[2] + gnoise * n[5]]
         if self._zeroing is not None:
             self._zero_step(ts, raw_gyro)
-        grange, corr = md.gyro_range_dps, self._gyro_correction
-        gyro = (float(max(-grange, min(grange, raw_gyro[0] - corr[0]))),
-                float(max(-grange, min(grange, raw_gyro[1] - corr[1]))),
-                float(max(-grange, min(grange, raw_gyro[2] - corr[2]))))
+        hi = float(md.gyro_range_dps)
+        lo = -hi
+        corr = self._gyro_correction
+        x0, x1, x2 = raw_gyro[0] - corr[0], raw_gyro[1] - corr[1], raw_gyro[2] - corr[2]
+        x0 = x0 if x0 < hi else hi
+        x1 = x1 if x1 < hi else hi
+        x2 = x2 if x2 < hi else hi
+        gyro = (x0 if x0 > lo else lo, x1 if x1 > lo else lo, x2 if x2 > lo else lo)
         mag: Vec3 | None = None
         if md.earth_field_gauss is not None:
             # The field in the chassis' axes (_rot_zyx(roll, pitch, yaw) transposed), then
@@ -354,9 +364,9 @@ class ImuEmulator:
             h1 = (cy * sp * sr - sy * cr) * e0 + (sy * sp * sr + cy * cr) * e1 + cp * sr * e2
             h2 = (cy * sp * cr + sy * sr) * e0 + (sy * sp * cr - cy * sr) * e1 + cp * cr * e2
             mnoise = md.mag_noise_gauss
-            mag = (float(m00 * h0 + m10 * h1 + m20 * h2 + mnoise * n[6]),
-                   float(m01 * h0 + m11 * h1 + m21 * h2 + mnoise * n[7]),
-                   float(m02 * h0 + m12 * h1 + m22 * h2 + mnoise * n[8]))
+            mag = (m00 * h0 + m10 * h1 + m20 * h2 + mnoise * n[6],
+                   m01 * h0 + m11 * h1 + m21 * h2 + mnoise * n[7],
+                   m02 * h0 + m12 * h1 + m22 * h2 + mnoise * n[8])
         self.samples += 1
         return SpatialData(ts, ms, accel_g, gyro, mag)
 
