@@ -128,6 +128,8 @@ class ArenaFloor:
     def update_contacts(self, body: Any, count: bool) -> None:
         """Count each collision and crater entry once, when it begins."""
         hits, craters = self.contacts(body)
+        if not hits and not craters and not self.touching:
+            return  # clear of everything, as before: nothing begins, nothing to remember
         now = hits | craters
         if count:
             for what in sorted(hits - self.touching):
