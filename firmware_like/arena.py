@@ -91,8 +91,13 @@ def footprint_corners(x: float, y: float, yaw: float, length: float, width: floa
     """Corners front-left, front-right, rear-left, rear-right (world x, y); yaw in radians."""
     c, s = math.cos(yaw), math.sin(yaw)
     hl, hw = length / 2.0, width / 2.0
-    return tuple((x + f * c - lft * s, y + f * s + lft * c)
-                 for f, lft in ((hl, hw), (hl, -hw), (-hl, hw), (-hl, -hw)))
+    nl, nw = -hl, -hw
+    # Written out (the chassis asks on every physics piece), the same sums as a loop over
+    # the corners' (forward, left) offsets.
+    return ((x + hl * c - hw * s, y + hl * s + hw * c),
+            (x + hl * c - nw * s, y + hl * s + nw * c),
+            (x + nl * c - hw * s, y + nl * s + hw * c),
+            (x + nl * c - nw * s, y + nl * s + nw * c))
 
 
 def disc_overlap(x: float, y: float, yaw: float, length: float, width: float,

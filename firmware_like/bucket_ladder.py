@@ -112,8 +112,11 @@ class BucketLadderExcavator:
         in the digging region; dump while the bin is raised, delivered when the chassis is
         `at_collector()`, spilled otherwise."""
         p = self.params
-        # Both chain motors drive one belt: its speed is their mean in the digging sense.
-        chain = sum(MOUNT[n] * self.speed[n] for n in CHAINS) / len(CHAINS)
+        # Both chain motors drive one belt: its speed is their mean in the digging sense
+        # (summed as sum() over CHAINS did: 0.0 first, then in order).
+        left, right = CHAINS
+        speed = self.speed
+        chain = (0.0 + MOUNT[left] * speed[left] + MOUNT[right] * speed[right]) / 2.0
         self.chain_dig_speed = max(0.0, chain)
         in_soil = self.lift_pos < p.dig_lift_max
         in_dig_region = front_x >= p.dig_region_start
@@ -146,8 +149,6 @@ class BucketLadderExcavator:
 
     def sample_noise(self, rng: random.Random) -> None:
         """Draw this step's sensor noise (after the chassis' draws, from the same stream)."""
-        p = self.params
-        self.noise = {
-            "ble.lift_pot": clipped_gauss(rng, p.pot_noise),
-            "ble.load_cell": clipped_gauss(rng, p.load_cell_noise),
-        }
+        p, noise = self.params, self.noise
+        noise["ble.lift_pot"] = clipped_gauss(rng, p.pot_noise)
+        noise["ble.load_cell"] = clipped_gauss(rng, p.load_cell_noise)

@@ -693,6 +693,10 @@ class HokuyoEmulator:
         self._listener.bind((host, port))
         self._listener.listen(4)
         self._listener.setblocking(False)
+        # One poll(0) per service says whether a connection or bytes wait: an accept() or
+        # recv() with nothing there costs several times more, in raising BlockingIOError.
+        self._poll = select.poll()
+        self._poll.register(self._listener.fileno(), select.POLLIN)
         self._client: _Client | None = None
         self._loop: IoLoop | None = None
         self.closed = False
@@ -726,8 +730,10 @@ class HokuyoEmulator:
         if self.closed:
             return
         t = self.clock.now() if now is None else now
-        self._accept(t)
-        self._read(t)
+        ready = self._poll.poll(0)
+        if ready:  # a connection, bytes, a hang-up or an error: look as before
+            self._accept(t)
+            self._read(t)
         self.sensor.service(t)
         self._write(t)
 
@@ -778,6 +784,7 @@ class HokuyoEmulator:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self._close_client(now)  # the newest connection wins
             self._client = _Client(sock)
+            self._poll.register(sock.fileno(), select.POLLIN)
             self.sensor.counters.connections += 1
             if self._loop is not None:
                 self._loop.add_reader(sock.fileno(), self.service)
@@ -824,6 +831,8 @@ class HokuyoEmulator:
         if client is None:
             return
         self._client = None
+        with contextlib.suppress(KeyError, ValueError):
+            self._poll.unregister(client.sock.fileno())
         if self._loop is not None:
             with contextlib.suppress(Exception):
                 self._loop.remove_reader(client.sock.fileno())

@@ -275,30 +275,38 @@ class ImuEmulator:
                      _vec(tr.omega_body), _vec(tr.accel_body))
 
     def _measure(self, ts: float, ms: float, prev: _Snap | None, cur: _Snap) -> SpatialData:
+        # The vector helpers below (_lerp, _cross, _mat_t_vec, ...) are written out here, each
+        # sum in the helper's own order: this runs 125 times a simulated second.
         md = self.model
         # Chassis motion at ts, interpolated between the last two truths.
         if prev is None:
-            roll, pitch, yaw, omega, accel = cur.roll, cur.pitch, cur.yaw, cur.omega, cur.accel
-            alpha: Vec3 = (0.0, 0.0, 0.0)
+            roll, pitch, yaw = cur.roll, cur.pitch, cur.yaw
+            (w0, w1, w2), (c0, c1, c2) = cur.omega, cur.accel
+            al0 = al1 = al2 = 0.0
         else:
             span = cur.t - prev.t
             f = min(1.0, max(0.0, (ts - prev.t) / span))
             roll = prev.roll + f * _wrap(cur.roll - prev.roll)
             pitch = prev.pitch + f * _wrap(cur.pitch - prev.pitch)
             yaw = prev.yaw + f * _wrap(cur.yaw - prev.yaw)
-            omega = _lerp(prev.omega, cur.omega, f)
-            accel = _lerp(prev.accel, cur.accel, f)
-            alpha = _scale(_sub(cur.omega, prev.omega), 1.0 / span)
+            (p0, p1, p2), (q0, q1, q2) = prev.omega, cur.omega
+            w0, w1, w2 = p0 + f * (q0 - p0), p1 + f * (q1 - p1), p2 + f * (q2 - p2)
+            (a0, a1, a2), (b0, b1, b2) = prev.accel, cur.accel
+            c0, c1, c2 = a0 + f * (b0 - a0), a1 + f * (b1 - a1), a2 + f * (b2 - a2)
+            inv = 1.0 / span
+            al0, al1, al2 = (q0 - p0) * inv, (q1 - p1) * inv, (q2 - p2) * inv
         # Specific force at the mounting point, chassis axes: a + alpha x r + w x (w x r) - g.
-        r = self.lever
-        a_point = _add(accel, _add(_cross(alpha, r), _cross(omega, _cross(omega, r))))
+        r0, r1, r2 = self.lever
+        x0, x1, x2 = w1 * r2 - w2 * r1, w2 * r0 - w0 * r2, w0 * r1 - w1 * r0  # w x r
         sr, cr = math.sin(roll), math.cos(roll)
         sp, cp = math.sin(pitch), math.cos(pitch)
-        up_in_chassis = (-sp, sr * cp, cr * cp)  # world +z seen from the chassis (ZYX)
-        force = _add(a_point, _scale(up_in_chassis, GRAVITY_MPS2))
+        # world +z seen from the chassis (ZYX) is (-sp, sr cp, cr cp)
+        force = (c0 + ((al1 * r2 - al2 * r1) + (w1 * x2 - w2 * x1)) + -sp * GRAVITY_MPS2,
+                 c1 + ((al2 * r0 - al0 * r2) + (w2 * x0 - w0 * x2)) + sr * cp * GRAVITY_MPS2,
+                 c2 + ((al0 * r1 - al1 * r0) + (w0 * x1 - w1 * x0)) + cr * cp * GRAVITY_MPS2)
         # The board's axes: mount rotation, turned further by an imu-shift once it happens.
         rot = self.mount_rotation
-        rate = omega
+        rate: Vec3 = (w0, w1, w2)
         frac = self.shift_fraction(ts)
         if frac >= 1.0:
             if self._shifted is None:
@@ -309,28 +317,58 @@ class ImuEmulator:
             theta = math.radians(self.shift_deg)
             rot = _mat_mul(_axis_angle(self.shift_axis, theta * frac), rot)
             rate = _add(rate, _scale(self.shift_axis, theta / md.shift_duration_s))
-        force_s = _mat_t_vec(rot, force)
-        rate_s = _mat_t_vec(rot, rate)
+        (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = rot
+        f0, f1, f2 = force
+        g0, g1, g2 = rate
         n = self._draw()
         if self.fault == "gyro-drift":
             self._advance_drift(n[9:12])
-        accel_g = tuple(
-            _clip(PHIDGET_ACCEL_SIGN * force_s[i] / GRAVITY_MPS2 + self.accel_bias_g[i]
-                  + md.accel_noise_g * n[i], md.accel_range_g)
-            for i in range(3))
-        raw_gyro = [math.degrees(rate_s[i]) + self.gyro_bias_dps[i] + self._drift[i]
-                    + md.gyro_noise_dps * n[3 + i] for i in range(3)]
-        self._zero_step(ts, raw_gyro)
-        gyro = tuple(_clip(raw_gyro[i] - self._gyro_correction[i], md.gyro_range_dps)
-                     for i in range(3))
+        # force and rate in the board's axes (rot transposed), to g and deg/s, with the
+        # board's bias and noise, clipped at its ranges: `_clip` (max(-hi, min(hi, x))) as
+        # two comparisons, which pick the same value.
+        hi = float(md.accel_range_g)
+        lo = -hi
+        anoise, abias = md.accel_noise_g, self.accel_bias_g
+        x0 = PHIDGET_ACCEL_SIGN * (m00 * f0 + m10 * f1 + m20 * f2) / GRAVITY_MPS2 + abias[0] \
+            + anoise * n[0]
+        x1 = PHIDGET_ACCEL_SIGN * (m01 * f0 + m11 * f1 + m21 * f2) / GRAVITY_MPS2 + abias[1] \
+            + anoise * n[1]
+        x2 = PHIDGET_ACCEL_SIGN * (m02 * f0 + m12 * f1 + m22 * f2) / GRAVITY_MPS2 + abias[2] \
+            + anoise * n[2]
+        x0 = x0 if x0 < hi else hi
+        x1 = x1 if x1 < hi else hi
+        x2 = x2 if x2 < hi else hi
+        accel_g = (x0 if x0 > lo else lo, x1 if x1 > lo else lo, x2 if x2 > lo else lo)
+        gnoise, gbias, drift = md.gyro_noise_dps, self.gyro_bias_dps, self._drift
+        raw_gyro = [
+            math.degrees(m00 * g0 + m10 * g1 + m20 * g2) + gbias[0] + drift[0] + gnoise * n[3],
+            math.degrees(m01 * g0 + m11 * g1 + m21 * g2) + gbias[1] + drift[1] + gnoise * n[4],
+            math.degrees(m02 * g0 + m12 * g1 + m22 * g2) + gbias[2] + drift[2] + gnoise * n[5]]
+        if self._zeroing is not None:
+            self._zero_step(ts, raw_gyro)
+        hi = float(md.gyro_range_dps)
+        lo = -hi
+        corr = self._gyro_correction
+        x0, x1, x2 = raw_gyro[0] - corr[0], raw_gyro[1] - corr[1], raw_gyro[2] - corr[2]
+        x0 = x0 if x0 < hi else hi
+        x1 = x1 if x1 < hi else hi
+        x2 = x2 if x2 < hi else hi
+        gyro = (x0 if x0 > lo else lo, x1 if x1 > lo else lo, x2 if x2 > lo else lo)
         mag: Vec3 | None = None
         if md.earth_field_gauss is not None:
-            world_to_chassis = _rot_zyx(roll, pitch, yaw)
-            field_c = _mat_t_vec(world_to_chassis, md.earth_field_gauss)
-            field_s = _mat_t_vec(rot, field_c)
-            mag = _vec([field_s[i] + md.mag_noise_gauss * n[6 + i] for i in range(3)])
+            # The field in the chassis' axes (_rot_zyx(roll, pitch, yaw) transposed), then
+            # in the board's.
+            e0, e1, e2 = md.earth_field_gauss
+            cy, sy = math.cos(yaw), math.sin(yaw)
+            h0 = cy * cp * e0 + sy * cp * e1 + -sp * e2
+            h1 = (cy * sp * sr - sy * cr) * e0 + (sy * sp * sr + cy * cr) * e1 + cp * sr * e2
+            h2 = (cy * sp * cr + sy * sr) * e0 + (sy * sp * cr - cy * sr) * e1 + cp * cr * e2
+            mnoise = md.mag_noise_gauss
+            mag = (m00 * h0 + m10 * h1 + m20 * h2 + mnoise * n[6],
+                   m01 * h0 + m11 * h1 + m21 * h2 + mnoise * n[7],
+                   m02 * h0 + m12 * h1 + m22 * h2 + mnoise * n[8])
         self.samples += 1
-        return SpatialData(ts, ms, _vec(accel_g), _vec(gyro), mag)
+        return SpatialData(ts, ms, accel_g, gyro, mag)
 
     def _advance_drift(self, w: Any) -> None:
         """One step of a first-order Gauss-Markov bias pulled toward `drift_mean_dps`."""

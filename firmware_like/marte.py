@@ -148,6 +148,9 @@ class MarteWorld:
         self._outputs: dict[str, bool] = dict.fromkeys(DIGITAL_OUTPUTS, False)
         self._unplugged: set[str] = set()
         self._wheel_scale = dict(zip(WHEELS, p.wheel_speed_scale, strict=True))
+        # Two derived params (properties of the frozen params) the physics reads every piece.
+        self._free_speed = p.wheel_free_speed
+        self._capacity_c = p.battery_capacity_c
         #: The Bucket Ladder Excavator, a part of its own that this chassis carries and steps
         #: (`firmware_like.bucket_ladder`); the `ble` module's signals are its.
         self.ble = BucketLadderExcavator(self.params)
@@ -196,7 +199,8 @@ class MarteWorld:
 
     def set_motor(self, name: str, duty: float) -> None:
         """Command one motor; duty is clamped to -1..1 as a motor controller would."""
-        _known(name, "motor", MOTORS)
+        if name not in MOTORS:
+            _known(name, "motor", MOTORS)
         duty = float(duty)
         if not math.isfinite(duty):
             raise ValueError(f"duty for {name} must be finite, got {duty!r}")
@@ -210,7 +214,8 @@ class MarteWorld:
 
     def read_analog(self, name: str) -> float:
         """Volts at the ADC pin, as sampled at the last step."""
-        _known(name, "analog input", ANALOG_INPUTS)
+        if name not in ANALOG_INPUTS:
+            _known(name, "analog input", ANALOG_INPUTS)
         p = self.params
         if name != "base.battery":
             return self.ble.read_pot()
@@ -219,9 +224,9 @@ class MarteWorld:
 
     def read_digital(self, name: str) -> bool:
         """Docking buttons: closed while that rear corner touches the collector wall x = 0."""
-        _known(name, "digital input", DIGITAL_INPUTS)
-        rear_left, rear_right = self._corners()[2:]
-        corner = rear_left if name == "base.l_button" else rear_right
+        if name not in DIGITAL_INPUTS:
+            _known(name, "digital input", DIGITAL_INPUTS)
+        corner = self._corners()[2 if name == "base.l_button" else 3]
         return corner[0] <= self.params.button_travel
 
     def write_digital(self, name: str, on: bool) -> None:
@@ -236,7 +241,8 @@ class MarteWorld:
 
     def read_bridge(self, name: str) -> float:
         """Load cell ratio in mV/V: an offset for the empty bin plus the regolith's weight."""
-        _known(name, "bridge input", BRIDGE_INPUTS)
+        if name not in BRIDGE_INPUTS:
+            _known(name, "bridge input", BRIDGE_INPUTS)
         return self.ble.read_load_cell()
 
     def bus_present(self, bus: str) -> bool:
@@ -491,10 +497,14 @@ class MarteWorld:
         # Motors: first-order lag toward duty x (rail voltage / reference voltage). The rail
         # voltage is the previous piece's, which keeps the battery-motor loop explicit.
         volt_factor = max(0.0, self.battery_voltage) / p.motor_ref_voltage
-        alpha = 1.0 - math.exp(-dt / p.motor_time_constant)
+        if dt != self._alpha_dt:  # every piece of a run is usually as long as the last
+            self._alpha_dt = dt
+            self._alpha = 1.0 - math.exp(-dt / p.motor_time_constant)
+        alpha = self._alpha
+        duty, speed = self._duty, self._speed
         for name in WHEELS:
-            target = self._duty[name] * volt_factor
-            self._speed[name] += (target - self._speed[name]) * alpha
+            target = duty[name] * volt_factor
+            speed[name] += (target - speed[name]) * alpha
         self.ble.follow_duty(volt_factor, alpha)
         self._move_chassis(dt)
         self.ble.move_lift(dt)
@@ -506,8 +516,15 @@ class MarteWorld:
         p = self.params
         x0, y0, z0, yaw0, roll0, pitch0 = (self.x, self.y, self.z, self.heading, self.roll,
                                            self.pitch)
-        left = sum(self._wheel_ground_speed(n) for n in LEFT_WHEELS) / len(LEFT_WHEELS)
-        right = sum(self._wheel_ground_speed(n) for n in RIGHT_WHEELS) / len(RIGHT_WHEELS)
+        # The mean ground speed of each side (`_wheel_ground_speed` written out), summed as
+        # sum() over the side's wheels did (0.0 first, then in order).
+        sp, sc, free = self._speed, self._wheel_scale, self._free_speed
+        lf, lb = LEFT_WHEELS
+        rf, rb = RIGHT_WHEELS
+        left = (0.0 + _MOUNT[lf] * sp[lf] * free * sc[lf] + _MOUNT[lb] * sp[lb] * free * sc[lb]
+                ) / 2.0
+        right = (0.0 + _MOUNT[rf] * sp[rf] * free * sc[rf] + _MOUNT[rb] * sp[rb] * free * sc[rb]
+                 ) / 2.0
         left *= self.floor.traction * p.traction
         right *= self.floor.traction * p.traction
         v = 0.5 * (left + right)
@@ -580,18 +597,19 @@ class MarteWorld:
     def _drain_battery(self, dt: float) -> None:
         p = self.params
         current = p.idle_current
+        duty, amps = self._duty, p.wheel_current
         for name in WHEELS:
-            current += abs(self._duty[name]) * p.wheel_current
+            current += abs(duty[name]) * amps
         current = self.ble.add_current(current)
         self.battery_current = current
-        self.battery_soc = max(0.0, self.battery_soc - current * dt / p.battery_capacity_c)
+        self.battery_soc = max(0.0, self.battery_soc - current * dt / self._capacity_c)
         ocv = self._ocv(self.battery_soc)
         self.battery_voltage = max(0.0, ocv - current * p.battery_r_internal)
 
     # ---- helpers ------------------------------------------------------------------------------
 
     def _wheel_ground_speed(self, name: str) -> float:
-        return (_MOUNT[name] * self._speed[name] * self.params.wheel_free_speed
+        return (_MOUNT[name] * self._speed[name] * self._free_speed
                 * self._wheel_scale[name])
 
     def _ocv(self, soc: float) -> float:
@@ -623,11 +641,12 @@ class MarteWorld:
 
     _corners_pose: tuple[float, float, float] | None = None
     _corners_at: tuple[tuple[float, float], ...] = ()
+    _alpha_dt = math.nan  # the piece length `_alpha` (the motors' lag factor) was worked for
+    _alpha = 0.0
 
     def _sample_noise(self) -> None:
         """Draw this step's sensor noise once, so repeated reads agree and runs repeat."""
-        p = self.params
-        self._noise = {"base.battery": clipped_gauss(self._rng, p.v_sensor_noise)}
+        self._noise["base.battery"] = clipped_gauss(self._rng, self.params.v_sensor_noise)
         self.ble.sample_noise(self._rng)
 
 

@@ -78,6 +78,9 @@ class Terrain:
         self._cd = np.array([c[3] for c in self._crater])
         self._cb = np.array([c[4] for c in self._crater])
         self._reach = max([r[2] for r in self._rock] + [c[2] for c in self._crater] + [0.0])
+        self._centres = [(r[0], r[1]) for r in self._rock] + [(c[0], c[1]) for c in self._crater]
+        #: (wheel radius, half width) -> the squared distance `wheel_contact` looks within.
+        self._wheel_reach2: dict[tuple[float, float], float] = {}
         self._steps = np.arange(4096)  # ray numbers, sliced per call
         self._k = np.stack([self._kx, self._ky])  # (2, waves): phase rate per metre of x, y
 
@@ -130,6 +133,19 @@ class Terrain:
 
     # ---- wheels -------------------------------------------------------------------------
 
+    @property
+    def reach(self) -> float:
+        """The largest rock or crater radius (0 with none)."""
+        return self._reach
+
+    def clear_of_obstacles(self, x: float, y: float, distance: float) -> bool:
+        """True when every rock and crater centre is at least `distance` from (x, y)."""
+        d2 = distance * distance
+        for cx, cy in self._centres:  # noqa: SIM110 - a loop: all() over a generator is slower
+            if (cx - x) ** 2 + (cy - y) ** 2 < d2:
+                return False
+        return True
+
     def wheel_contact(self, x: float, y: float, hx: float, hy: float, radius: float,
                       half_width: float) -> tuple[float, float]:
         """(height of the wheel's lowest point, bare ground's height) for a wheel resting on
@@ -138,9 +154,12 @@ class Terrain:
         crater the wheel rests on the highest place its rim touches (it rides up a rock's
         flank and bridges a crater's bowl, sinking only as far as the rim lets it)."""
         ground = self.ground_at(x, y)
-        reach = radius + half_width + self._reach
-        rocks = [r for r in self._rock if (r[0] - x) ** 2 + (r[1] - y) ** 2 < reach ** 2]
-        craters = [c for c in self._crater if (c[0] - x) ** 2 + (c[1] - y) ** 2 < reach ** 2]
+        reach2 = self._wheel_reach2.get((radius, half_width))
+        if reach2 is None:
+            reach = radius + half_width + self._reach
+            reach2 = self._wheel_reach2[(radius, half_width)] = reach ** 2
+        rocks = [r for r in self._rock if (r[0] - x) ** 2 + (r[1] - y) ** 2 < reach2]
+        craters = [c for c in self._crater if (c[0] - x) ** 2 + (c[1] - y) ** 2 < reach2]
         if not rocks and not craters:
             return ground, ground
         best = -math.inf

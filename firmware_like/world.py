@@ -13,7 +13,11 @@ is the config's module order.
 A part is any object with the methods of `ramp.hal.simio.SimWorld` it needs (`set_motor`,
 `read_analog`, `read_digital`, `write_digital`, `read_bridge`, `set_servo`, `read_servo`),
 `step(dt)`, and optionally `revision` (an int that moves on when its readings may change) and
-`bus_present(bus)`.
+`bus_present(bus)`, each one the part has when it is added.
+
+The buses read a few signals and ask `revision` and `bus_present` on every tick, so a
+signal's owner, once found, is called directly, and the parts with a `revision` or a
+`bus_present` are listed when they are added.
 """
 
 from __future__ import annotations
@@ -64,6 +68,8 @@ class World:
         self._owner: dict[str, Any] = {}
         self._unplugged: set[str] = set()
         self._own_revision = 0
+        self._revisioned: list[Any] = []  # the parts with a `revision` of their own
+        self._bus_watchers: list[Any] = []  # the parts with a `bus_present` of their own
         #: Inputs the `sim` module holds at a value (`sim:input.set`): name -> quantity.
         self.overrides: dict[str, float] = {}
         for part in parts or []:
@@ -73,6 +79,10 @@ class World:
         """Add a part (once: a part shared by two modules is stepped once)."""
         if not any(p is part for p in self.parts):
             self.parts.append(part)
+            if hasattr(part, "revision"):
+                self._revisioned.append(part)
+            if hasattr(part, "bus_present"):
+                self._bus_watchers.append(part)
 
     def _route(self, method: str, name: str, *args: Any) -> Any:
         owner = self._owner.get(name)
@@ -94,42 +104,73 @@ class World:
         return getattr(self.plain, method)(name, *args)
 
     # -- the SimWorld protocol (ramp.hal.simio) ---------------------------------------------
+    # A signal's owner, once `_route` has found it, is called directly.
     def set_motor(self, name: str, duty: float) -> None:
-        self._route("set_motor", name, duty)
+        owner = self._owner.get(name)
+        if owner is None:
+            self._route("set_motor", name, duty)
+        else:
+            owner.set_motor(name, duty)
 
     def read_analog(self, name: str) -> float:
         if name in self.overrides:
             return float(self._overridden(name))
-        return float(self._route("read_analog", name))
+        owner = self._owner.get(name)
+        if owner is None:
+            return float(self._route("read_analog", name))
+        return float(owner.read_analog(name))
 
     def read_digital(self, name: str) -> bool:
         if name in self.overrides:
             return bool(self._overridden(name))
-        return bool(self._route("read_digital", name))
+        owner = self._owner.get(name)
+        if owner is None:
+            return bool(self._route("read_digital", name))
+        return bool(owner.read_digital(name))
 
     def write_digital(self, name: str, on: bool) -> None:
-        self._route("write_digital", name, on)
+        owner = self._owner.get(name)
+        if owner is None:
+            self._route("write_digital", name, on)
+        else:
+            owner.write_digital(name, on)
 
     def read_bridge(self, name: str) -> float:
         if name in self.overrides:
             return float(self._overridden(name))
-        return float(self._route("read_bridge", name))
+        owner = self._owner.get(name)
+        if owner is None:
+            return float(self._route("read_bridge", name))
+        return float(owner.read_bridge(name))
 
     def set_servo(self, name: str, target_deg: float | None, speed_dps: float) -> None:
-        self._route("set_servo", name, target_deg, speed_dps)
+        owner = self._owner.get(name)
+        if owner is None:
+            self._route("set_servo", name, target_deg, speed_dps)
+        else:
+            owner.set_servo(name, target_deg, speed_dps)
 
     def read_servo(self, name: str) -> float:
-        return float(self._route("read_servo", name))
+        owner = self._owner.get(name)
+        if owner is None:
+            return float(self._route("read_servo", name))
+        return float(owner.read_servo(name))
 
     def bus_present(self, bus: str) -> bool:
         if bus in self._unplugged:
             return False
-        return all(p.bus_present(bus) for p in self.parts if hasattr(p, "bus_present"))
+        for part in self._bus_watchers:  # noqa: SIM110 - a loop: all() over a generator is slower
+            if not part.bus_present(bus):
+                return False
+        return True
 
     @property
     def revision(self) -> int:
         """Moves on whenever any part's readings may have changed."""
-        return self._own_revision + sum(int(getattr(p, "revision", 0)) for p in self.parts)
+        total = self._own_revision
+        for part in self._revisioned:
+            total += int(part.revision)
+        return total
 
     # -- the `sim` module's hooks (SPEC 12) -------------------------------------------------
     def set_input(self, name: str, quantity: float) -> None:

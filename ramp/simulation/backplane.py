@@ -89,6 +89,7 @@ class SimBackplane:
         self.emulated: dict[str, Any] = {}
         self.odrive = self.emulated  # the name the tests of the CAN emulators use
         self._watched: dict[str, int] = {}
+        self._scheduler: Any = None  # the supervisor's, once attached
         #: Buses the `sim` module has unplugged.
         self.unplugged: set[str] = set()
         self.sim_module: Any = None  # the `sim` module, made by `attach`
@@ -190,7 +191,10 @@ class SimBackplane:
 
     def tick(self, now: float, dt: float) -> None:
         self._watch_ptys()
-        unread = [d for name, d in self.sabertooth.items() if name not in self._watched]
+        watched = self._watched
+        # (Every pty is watched by the loop's wait in `ramp sim`: no list to build then.)
+        unread = [d for name, d in self.sabertooth.items() if name not in watched] if len(
+            watched) < len(self.sabertooth) else None
         if unread:  # one look at every pty the wait does not watch, then read those with bytes
             ready = _readable([d.link.fileno() for d in unread])
             for device in unread:
@@ -199,7 +203,7 @@ class SimBackplane:
                 else:
                     device.emulator.tick(now)
         for name, device in self.sabertooth.items():
-            if name in self._watched:
+            if name in watched:
                 device.emulator.tick(now)  # its bytes are read when the pty is readable
         for service in self.services:
             service(now)
@@ -210,7 +214,7 @@ class SimBackplane:
 
     def _watch_ptys(self) -> None:
         """(Re)register each pty master with the loop: a replug opens a new one."""
-        sched = getattr(self, "_scheduler", None)
+        sched = self._scheduler
         if sched is None or not self.read_in_wait:
             return
         for name, device in self.sabertooth.items():
