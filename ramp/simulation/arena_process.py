@@ -50,7 +50,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict
 from typing import TYPE_CHECKING, Any
 
-from ramp.autonomy.hal.simlink import Message, SensorLink, sample_row
+from ramp.autonomy.hal.simlink import SERVO_OPS, Message, SensorLink, sample_row
 from ramp.scheduler import Scheduler
 
 if TYPE_CHECKING:
@@ -142,6 +142,8 @@ class SensorServer:
         self.imu = imu
         self.gimbal = gimbal
         self.imu_open = False
+        #: Values taken from the emulators that were not finite, so not sent.
+        self.not_finite = 0
         link.on("imu.open", self._imu_open)
         link.on("imu.close", self._imu_close)
         link.on("imu.interval", lambda m: imu.set_data_interval(int(m["ms"])))
@@ -156,35 +158,61 @@ class SensorServer:
         self.imu_open = False
 
     def _servo(self, msg: Message) -> None:
+        """One servo command, checked whole before it reaches the emulator: `engaged` takes
+        only true or false, the others only a number (never a string or a bool)."""
         if not self.gimbal.attached:
             return  # the board is unplugged: the command goes nowhere, as over USB
-        axis, op, value = msg["axis"], msg["op"], msg["v"]
+        axis, op, value = msg.get("axis"), msg.get("op"), msg.get("v")
         if axis not in ("pan", "tilt"):
             raise ValueError(f"servo axis {axis!r}: expected pan or tilt")
+        if op not in SERVO_OPS:
+            raise ValueError(f"servo op {op!r}: expected target, velocity, acceleration, "
+                             "engaged")
         channel = self.gimbal.pan if axis == "pan" else self.gimbal.tilt
+        if op == "engaged":
+            if not isinstance(value, bool):
+                raise ValueError(f"servo {axis} engaged: expected true or false, "
+                                 f"got {value!r:.40}")
+            channel.set_engaged(value)
+            return
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ValueError(f"servo {axis} {op}: expected a number, got {value!r:.40}")
         if op == "target":
             channel.set_target(float(value))
         elif op == "velocity":
             channel.set_velocity_limit(float(value))
-        elif op == "acceleration":
-            channel.set_acceleration(float(value))
-        elif op == "engaged":
-            channel.set_engaged(bool(value))
         else:
-            raise ValueError(f"servo op {op!r}: expected target, velocity, acceleration, "
-                             "engaged")
+            channel.set_acceleration(float(value))
 
     def tick(self, now: float, dt: float) -> None:
+        """Every sample and event taken from the emulators this tick goes out: a value that
+        is not finite (the link sends none) loses only itself, logged and counted in
+        `not_finite`, never the rest of what was taken."""
         imu, g = self.imu, self.gimbal
         if self.imu_open:
-            samples = imu.poll() if imu.attached else []
-            self.link.send("imu", attached=imu.attached, s=[sample_row(s) for s in samples])
+            rows = [sample_row(s) for s in imu.poll()] if imu.attached else []
+            good = [row for row in rows if all(map(math.isfinite, row))]
+            self._count_bad("IMU samples", len(rows) - len(good))
+            self.link.send("imu", attached=imu.attached, s=good)
         if g.attached:
-            pos = [g.pan.position_deg, g.tilt.position_deg]
-            reached = [g.pan.take_reached(), g.tilt.take_reached()]
+            pos: list[float | None] = []
+            reached: list[list[float]] = []
+            for channel in (g.pan, g.tilt):
+                p = channel.position_deg
+                ok = p is None or math.isfinite(p)
+                self._count_bad("servo positions", 0 if ok else 1)
+                pos.append(p if ok else None)
+                events = channel.take_reached()
+                reached.append([deg for deg in events if math.isfinite(deg)])
+                self._count_bad("target-reached events", len(events) - len(reached[-1]))
         else:
             pos, reached = [None, None], [[], []]
         self.link.send("gimbal", attached=g.attached, pos=pos, reached=reached)
+
+    def _count_bad(self, what: str, n: int) -> None:
+        if n:
+            self.not_finite += n
+            log.warning("sensor server: %d %s not finite, not sent", n, what)
 
 
 def truth_of(world: MarteWorld) -> dict[str, Any]:

@@ -8,6 +8,7 @@ an unplugged board or a lost link is a fault that clears when the board comes ba
 from __future__ import annotations
 
 import json
+import math
 import socket
 from collections.abc import Iterator
 from typing import Any
@@ -356,3 +357,164 @@ def test_the_server_ignores_a_bad_servo_command_and_goes_on(
     b.run(0.05)
     assert b.sim_end.connected and b.gimbal_emu.pan.target_deg is None
     assert "expected pan or tilt" in caplog.text and "expected target" in caplog.text
+
+
+# -- what a broken peer sends (a bad message is refused whole) ---------------------------------
+@pytest.mark.parametrize("number", [b"NaN", b"Infinity", b"-Infinity", b"1e400", b"-1e400"])
+def test_nan_and_infinity_are_refused_on_the_way_in_as_on_the_way_out(number: bytes) -> None:
+    with pytest.raises(ProtocolError, match="sensor link"):
+        decode(b'{"k": "truth", "x": ' + number + b"}\n")
+
+
+def test_a_line_nested_too_deeply_is_a_protocol_error_and_closes_the_link(
+        pair: tuple[SensorLink, socket.socket]) -> None:
+    deep = b'{"k": "truth", "x": ' + b"[" * 100_000 + b"]" * 100_000 + b"}\n"
+    with pytest.raises(ProtocolError, match="nested too deeply"):
+        decode(deep)
+    link, peer = pair
+    why: list[str] = []
+    link.on_close.append(why.append)
+    peer.sendall(deep + encode("truth", x=1.0))
+    for _ in range(10):
+        link.pump(0.2)
+    assert link.closed and "nested too deeply" in why[0]
+
+
+def test_decoding_the_first_line_does_not_copy_the_backlog_behind_it() -> None:
+    import timeit
+
+    line = encode("n", i=1)
+    short = bytearray(line * 2)
+    long = bytearray(line * (MAX_FRAME_BYTES // len(line)))  # a backlog of a megabyte
+    assert decode(long) == (len(line), {"k": "n", "i": 1})
+    t_short = min(timeit.repeat(lambda: decode(short), number=200, repeat=5))
+    t_long = min(timeit.repeat(lambda: decode(long), number=200, repeat=5))
+    assert t_long < 3 * t_short + 0.001, (t_short, t_long)  # copying it: 10 times as long
+
+
+def test_encoding_a_bad_field_names_the_kind_and_sending_it_names_the_link(
+        pair: tuple[SensorLink, socket.socket]) -> None:
+    with pytest.raises(ValueError, match="a 'truth' message cannot be sent"):
+        encode("truth", x=float("inf"))
+    with pytest.raises(ValueError, match="a 'truth' message cannot be sent"):
+        encode("truth", x=object())
+    link, _peer = pair
+    link.name = "sensor link (test)"
+    with pytest.raises(ValueError, match=r"sensor link \(test\): a 'imu' message"):
+        link.send("imu", s=[[float("nan")]])
+    assert link.connected and link.send("stop")
+
+
+def raw(link: SensorLink, doc: dict[str, Any]) -> None:
+    """Send `doc` as one line, bypassing `encode`'s checks (a broken peer)."""
+    link.sock.sendall(json.dumps(doc).encode() + b"\n")
+
+
+ROW = [0.01, 8.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0]
+
+
+@pytest.mark.parametrize("bad", [
+    {"attached": True, "s": [ROW, ROW[:5]]},  # the second row is short
+    {"attached": True, "s": [ROW, [*ROW[:7], "x"]]},
+    {"attached": True, "s": [ROW, [*ROW[:7], True]]},
+    {"attached": "false", "s": [ROW]},
+    {"attached": True, "s": "rows"},
+])
+def test_a_bad_imu_message_changes_nothing(
+        bad: dict[str, Any], caplog: pytest.LogCaptureFixture) -> None:
+    clock = VirtualClock()
+    sched = Scheduler(clock, 100.0)
+    a, b = socket.socketpair()
+    sim_end, link = SensorLink(a, sched), SensorLink(b, sched, name="autonomy end")
+    imu = SimLinkImu(ImuConfig(driver="simlink", data_interval_ms=8), link=link)
+    sched.add_task("imu", 100.0, imu.tick)
+    imu.open(0.0)
+    try:
+        for _ in range(3):
+            raw(sim_end, {"k": "imu", **bad})
+        sched.run_for(0.1)
+        assert link.connected and not imu.ready() and imu.drain() == []
+        assert "imu: " in caplog.text
+    finally:
+        link.close()
+        sim_end.close()
+
+
+@pytest.mark.parametrize(("bad", "what"), [
+    ({"pos": [10.0], "reached": [[], []]}, '"pos" is not'),  # one position: pan was set
+    ({"pos": [10.0, 5.0], "reached": [[10.0], ["x"]]}, "gimbal tilt: target reached"),
+    ({"pos": [10.0, float("nan")], "reached": [[10.0], []]}, "NaN in a message"),
+    ({"pos": [True, 5.0], "reached": [[], []]}, "gimbal pan: position"),
+    ({"pos": [10.0, 5.0], "reached": [[10.0]]}, '"reached" is not'),
+])
+def test_a_bad_gimbal_message_changes_nothing(
+        bad: dict[str, Any], what: str, caplog: pytest.LogCaptureFixture) -> None:
+    clock = VirtualClock()
+    sched = Scheduler(clock, 100.0)
+    a, b = socket.socketpair()
+    sim_end, link = SensorLink(a, sched), SensorLink(b, sched, name="autonomy end")
+    gimbal = SimLinkPanTilt(GIMBAL, link=link)
+    sched.add_task("gimbal", 100.0, gimbal.tick)
+    gimbal.point(0.0, 0.0)
+    gimbal.engage()
+    gimbal.open(0.0)
+    try:
+        raw(sim_end, {"k": "gimbal", "attached": True, **bad})
+        sched.run_for(0.05)
+        assert not gimbal.pan.attached and not gimbal.tilt.attached
+        assert gimbal.angles() == (None, None) and not gimbal.reached
+        assert what in caplog.text or what in link.reason
+    finally:
+        link.close()
+        sim_end.close()
+
+
+def test_the_server_engages_a_servo_only_for_a_real_true(
+        bench: Bench, caplog: pytest.LogCaptureFixture) -> None:
+    b = bench
+    b.gimbal.open(0.0)
+    b.run(0.05)
+    b.link.send("servo", axis="pan", op="target", v=10.0)
+    for value in ("false", "true", 1, None):
+        b.link.send("servo", axis="pan", op="engaged", v=value)
+        b.run(0.02)
+        assert not b.gimbal_emu.pan.engaged, value
+    assert "engaged" in caplog.text and "true or false" in caplog.text
+    b.link.send("servo", axis="pan", op="target", v="12")
+    b.run(0.02)
+    assert b.gimbal_emu.pan.target_deg == 10.0 and "a number" in caplog.text
+    b.link.send("servo", axis="pan", op="engaged", v=True)
+    b.run(0.02)
+    assert b.gimbal_emu.pan.engaged and b.sim_end.connected
+
+
+def test_a_sample_that_cannot_be_sent_loses_only_itself(
+        bench: Bench, monkeypatch: pytest.MonkeyPatch,
+        caplog: pytest.LogCaptureFixture) -> None:
+    b = bench
+    b.imu.open(0.0)
+    b.gimbal.open(0.0)
+    b.gimbal.point(0.0, 0.0)
+    b.gimbal.engage()
+    b.run(0.3)
+    assert b.imu.ready() and b.gimbal.ready()
+    b.imu.drain()
+    poll, take = b.emu.poll, b.gimbal_emu.tilt.take_reached
+    poisoned: list[float] = []
+
+    def poisoned_poll() -> list[Any]:
+        samples = poll()
+        if samples and not poisoned:  # one sample goes bad, once
+            poisoned.append(samples[0].t)
+            samples[0] = samples[0]._replace(t=float("nan"))
+        return samples
+
+    monkeypatch.setattr(b.emu, "poll", poisoned_poll)
+    monkeypatch.setattr(b.gimbal_emu.tilt, "take_reached", lambda: [float("inf"), *take()])
+    b.gimbal.point(30.0, 0.0)
+    b.run(1.0)
+    assert b.sim_end.connected and b.gimbal.reached and b.gimbal.angles() == (30.0, 0.0)
+    got = b.imu.drain()
+    assert len(got) >= 110 and all(math.isfinite(s.t) for s in got)
+    assert poisoned[0] not in [s.t for s in got] and b.server.not_finite >= 2
+    assert "1 IMU samples not finite" in caplog.text

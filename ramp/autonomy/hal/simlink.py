@@ -10,8 +10,11 @@ backend MCP; the IMU and the gimbal are HAL-level emulators (USB cannot be emula
 
 - `encode(kind, **fields)` and `decode(buf) -> (used, message)` are the sans-IO codec (0 used:
   need more bytes; a message of None with bytes used: a blank line). A line longer than
-  `MAX_FRAME_BYTES`, or one that is not a JSON object with a string `"k"`, is a
-  ProtocolError: the peer is broken, and the link closes (fail closed).
+  `MAX_FRAME_BYTES`, or one that is not a JSON object with a string `"k"` (nested past the
+  parser's depth, or holding a NaN or an infinity, which `encode` never sends), is a
+  ProtocolError: the peer is broken, and the link closes (fail closed). A message whose
+  fields are wrong (a short row, a string for a number) is refused whole by its handler,
+  which changes nothing; the link logs it and goes on.
 - `SensorLink` moves the bytes: a non-blocking socket serviced as a reader (and a writer while
   its output is backed up) on the scheduler's loop, so it never blocks a tick; `on(kind, fn)`
   routes the messages. A peer that closes, resets or stops reading closes the link and tells
@@ -66,25 +69,47 @@ SERVO_OPS = ("target", "velocity", "acceleration", "engaged")
 
 # -- the codec ---------------------------------------------------------------------------------
 def encode(kind: str, **fields: Any) -> bytes:
-    """One message as its line (floats keep every bit: JSON writes their repr)."""
-    return json.dumps({"k": kind, **fields}, separators=(",", ":"),
-                      allow_nan=False).encode("utf-8") + b"\n"
+    """One message as its line (floats keep every bit: JSON writes their repr). ValueError,
+    naming the kind, for a field that is not JSON: NaN and the infinities never leave."""
+    try:
+        text = json.dumps({"k": kind, **fields}, separators=(",", ":"), allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"a {kind!r} message cannot be sent: {exc}") from exc
+    return text.encode("utf-8") + b"\n"
 
 
-def decode(buf: bytes | bytearray | memoryview) -> tuple[int, Message | None]:
+def _refuse_constant(name: str) -> Any:
+    raise ProtocolError(f"sensor link: {name} in a message (only finite numbers are sent)")
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):  # 1e400: a number JSON allows, a float cannot hold
+        raise ProtocolError(f"sensor link: {text[:40]} is out of a float's range")
+    return value
+
+
+def decode(buf: bytes | bytearray) -> tuple[int, Message | None]:
     """(bytes used, the message) of the first line in `buf`; (0, None) when it is not whole
-    yet. ProtocolError for a line that is too long or not a message."""
-    view = bytes(buf[:MAX_FRAME_BYTES + 1]) if len(buf) > MAX_FRAME_BYTES else bytes(buf)
-    end = view.find(b"\n")
+    yet. ProtocolError for a line that is too long or not a message (not JSON, nested past
+    the parser's depth, a NaN or an infinity: `encode` sends none).
+
+    Only the first line is copied, however long the backlog behind it: the link decodes a
+    burst one line at a time from the front of its buffer."""
+    end = buf.find(b"\n", 0, MAX_FRAME_BYTES + 1)
     if end < 0:
-        if len(view) > MAX_FRAME_BYTES:
+        if len(buf) > MAX_FRAME_BYTES:
             raise ProtocolError(f"sensor link: a line longer than {MAX_FRAME_BYTES} bytes")
         return 0, None
-    line = view[:end].strip()
+    line = bytes(buf[:end]).strip()
     if not line:
         return end + 1, None
     try:
-        msg = json.loads(line)
+        msg = json.loads(line, parse_constant=_refuse_constant, parse_float=_finite_float)
+    except ProtocolError:
+        raise
+    except RecursionError as exc:
+        raise ProtocolError(f"sensor link: a line nested too deeply: {line[:60]!r}") from exc
     except (UnicodeDecodeError, ValueError) as exc:
         raise ProtocolError(f"sensor link: not JSON: {line[:60]!r}") from exc
     if not isinstance(msg, dict) or not isinstance(msg.get("k"), str):
@@ -141,10 +166,16 @@ class SensorLink:
 
     # -- sending -----------------------------------------------------------------------------
     def send(self, kind: str, **fields: Any) -> bool:
-        """Queue one message and write what the socket takes now; False once closed."""
+        """Queue one message and write what the socket takes now; False once closed.
+        ValueError, naming the link and the kind, for a message that is not JSON (nothing
+        is queued: the link goes on)."""
         if self.closed:
             return False
-        self._out += encode(kind, **fields)
+        try:
+            line = encode(kind, **fields)
+        except ValueError as exc:
+            raise ValueError(f"{self.name}: {exc}") from exc
+        self._out += line
         self.sent += 1
         self._flush()
         return not self.closed
@@ -259,11 +290,13 @@ class SensorLink:
                 log.exception("%s: a close listener raised", self.name)
 
 
-def _floats(values: Any, n: int) -> tuple[float, ...]:
-    out = tuple(float(v) for v in values[:n])
-    if len(out) != n or not all(math.isfinite(v) for v in out):
-        raise ValueError(f"expected {n} finite numbers, got {values!r}")
-    return out
+def _floats(values: Any, n: int, what: str) -> tuple[float, ...]:
+    """`n` finite numbers (not bools) from the list `values`; ValueError naming `what`."""
+    if not isinstance(values, list) or len(values) != n or not all(
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+            for v in values):
+        raise ValueError(f"{what}: expected {n} finite numbers, got {values!r:.80}")
+    return tuple(float(v) for v in values)
 
 
 def sample_row(s: Any) -> list[float]:
@@ -276,14 +309,22 @@ def sample_row(s: Any) -> list[float]:
     return row
 
 
-def parse_sample(row: Any) -> ImuSample:
-    """An `imu` message's row as a sample; ValueError when it is not one."""
+def parse_sample(row: Any, who: str = "imu") -> ImuSample:
+    """An `imu` message's row as a sample; ValueError, naming the device `who`, when it is
+    not one."""
     if not isinstance(row, list) or len(row) not in (8, 11):
-        raise ValueError(f"an IMU sample is 8 or 11 numbers, got {row!r}")
-    v = _floats(row, len(row))
+        raise ValueError(f"{who}: an IMU sample is 8 or 11 numbers, got {row!r:.80}")
+    v = _floats(row, len(row), f"{who}: an IMU sample")
     mag = (v[8], v[9], v[10]) if len(v) == 11 else None
     return ImuSample(t=v[0], timestamp_ms=v[1], accel_g=(v[2], v[3], v[4]),
                      gyro_dps=(v[5], v[6], v[7]), mag_gauss=mag)
+
+
+def _attached(msg: Message, who: str) -> bool:
+    attached = msg.get("attached")
+    if not isinstance(attached, bool):
+        raise ValueError(f"{who}: \"attached\" is not true or false: {attached!r:.40}")
+    return attached
 
 
 # -- the drivers -------------------------------------------------------------------------------
@@ -300,14 +341,21 @@ class SimLinkImu(Imu):
         link.on("imu", self._on_imu)
 
     def _on_imu(self, msg: Message) -> None:
+        """The whole message is checked before any of it is taken: a bad one changes
+        nothing (the link logs it and goes on)."""
         if not self.is_open:
             return
-        self._board = bool(msg.get("attached"))
-        for row in msg.get("s") or ():
+        board = _attached(msg, self.name)
+        rows = msg.get("s", [])
+        if not isinstance(rows, list):
+            raise ValueError(f"{self.name}: \"s\" is not a list of samples: {rows!r:.80}")
+        samples = [parse_sample(row, self.name) for row in rows]
+        self._board = board
+        for sample in samples:
             if len(self._pending) >= self.MAX_BUFFER:
                 del self._pending[0]
                 self.dropped += 1
-            self._pending.append(parse_sample(row))
+            self._pending.append(sample)
 
     def _open(self, now: float) -> None:
         self._attached = False
@@ -404,15 +452,27 @@ class SimLinkPanTilt(PanTilt):
         return (pan, tilt)
 
     def _on_gimbal(self, msg: Message) -> None:
+        """The whole message is checked before any of it is taken: a bad one changes
+        nothing (the link logs it and goes on)."""
         if not self.is_open:
             return
-        self._board = bool(msg.get("attached"))
-        pos = msg.get("pos") or (None, None)
-        reached = msg.get("reached") or ((), ())
+        board = _attached(msg, self.name)
+        pos = msg.get("pos", [None, None])
+        reached = msg.get("reached", [[], []])
+        if not isinstance(pos, list) or len(pos) != 2:
+            raise ValueError(f"{self.name}: \"pos\" is not [pan, tilt]: {pos!r:.80}")
+        if not isinstance(reached, list) or len(reached) != 2 \
+                or not all(isinstance(r, list) for r in reached):
+            raise ValueError(f"{self.name}: \"reached\" is not [[pan...], [tilt...]]: "
+                             f"{reached!r:.80}")
+        positions = [None if p is None else _floats([p], 1, f"{self.name} {axis}: position")[0]
+                     for axis, p in zip(AXES, pos, strict=True)]
+        events = [_floats(r, len(r), f"{self.name} {axis}: target reached")
+                  for axis, r in zip(AXES, reached, strict=True)]
+        self._board = board
+        self._positions = positions
         for i in range(2):
-            p = pos[i]
-            self._positions[i] = None if p is None else _floats([p], 1)[0]
-            self._reached[i].extend(_floats(list(reached[i]), len(reached[i])))
+            self._reached[i].extend(events[i])
 
     def _open(self, now: float) -> None:
         self._board = False
