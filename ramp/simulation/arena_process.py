@@ -66,6 +66,9 @@ READY_TIMEOUT_S = 60.0  # the child imports numpy, builds the world, opens the b
 END_TIMEOUT_S = 10.0  # for the child's `end` once told to stop
 EXIT_TIMEOUT_S = 10.0  # then for it to exit, before SIGTERM, then SIGKILL
 HISTOGRAM_US = 10.0  # lateness is counted in bins this wide
+#: After the backend's shutdown, how long its zeros may take to reach the emulated motors
+#: (the Sabertooth wire is paced at its baud rate: 0.1 s was seen; ASSUMPTION: 2.5x margin).
+STOP_SETTLE_S = 0.25
 
 
 class ArenaError(RuntimeError):
@@ -241,20 +244,26 @@ class Arena:
         randomization = Randomization.draw(o.seed) if o.randomize else None
         self.world = make_world(o, randomization)
         config = mission_config(load_autonomy_config(o.config), o.duration)
-        self.backend = SimBackend(self.world, clock=MonotonicClock(), port=o.port)
-        scheduler = self.backend.scheduler
-        self.ticks = TickLog(scheduler)
-        self.sensors = SimSensors(self.world, config, scheduler, seed=o.seed, fault=o.fault,
-                                  run_length_s=o.duration, backend=self.backend,
-                                  randomization=randomization)
-        self.server = SensorServer(link, self.sensors.imu_emulator,
-                                   self.sensors.gimbal_emulator)
-        self._logged = (0, 0)
-        link.on("stop", lambda m: self.stop("the autonomy's process asked"))
-        link.on_close.append(lambda why: self.stop(f"the sensor link closed: {why}"))
-        link.attach(scheduler)
-        scheduler.add_task("sim.link", scheduler.rate_hz, self.server.tick)
-        scheduler.add_task("sim.truth", TRUTH_HZ, self._truth)
+        # What is built is closed again if a later step fails: the backend stops its motors
+        # (`Supervisor.shutdown`) and frees its port, the Hokuyo emulator its own.
+        with contextlib.ExitStack() as built:
+            self.backend = SimBackend(self.world, clock=MonotonicClock(), port=o.port)
+            built.callback(self.backend.close)
+            scheduler = self.backend.scheduler
+            self.ticks = TickLog(scheduler)
+            self.sensors = SimSensors(self.world, config, scheduler, seed=o.seed,
+                                      fault=o.fault, run_length_s=o.duration,
+                                      backend=self.backend, randomization=randomization)
+            built.callback(self.sensors.close)
+            self.server = SensorServer(link, self.sensors.imu_emulator,
+                                       self.sensors.gimbal_emulator)
+            self._logged = (0, 0)
+            link.on("stop", lambda m: self.stop("the autonomy's process asked"))
+            link.on_close.append(lambda why: self.stop(f"the sensor link closed: {why}"))
+            link.attach(scheduler)
+            scheduler.add_task("sim.link", scheduler.rate_hz, self.server.tick)
+            scheduler.add_task("sim.truth", TRUTH_HZ, self._truth)
+            built.pop_all()
 
     def stop(self, why: str) -> None:
         if not self.stopping:
@@ -266,18 +275,44 @@ class Arena:
                        lidar=self.sensors.lidar_emulator.url)
         try:
             self.backend.scheduler.run(lambda: bool(self.stopping))
+            # Every motor stops before anything else: `end` may wait for the parent.
+            motors = self.stop_motors()
             if self.link.connected:
                 self.link.send("end", why=self.stopping, backend=self.ticks.report(),
-                               **self._truth_fields(full=True))
+                               motors=motors, **self._truth_fields(full=True))
                 self.link.drain(2.0)
         finally:
             self.close()
         return 0
 
+    def stop_motors(self) -> dict[str, float]:
+        """`Supervisor.shutdown` (zeros on every wire), then the emulators read the wire
+        until every motor of the world reads zero or `STOP_SETTLE_S` has passed; the
+        world's motor duties as the robot was left (the summary's `motors_at_end`)."""
+        from firmware_like.marte import MOTORS
+
+        backend, world = self.backend, self.world
+        backend.supervisor.shutdown()
+        deadline = time.monotonic() + STOP_SETTLE_S
+        while True:
+            backend.backplane.service_wire(backend.clock.now())
+            duty = {name: world.duty(name) for name in MOTORS}
+            if not any(duty.values()) or time.monotonic() >= deadline:
+                break
+            time.sleep(0.01)
+        backend.close()
+        return duty
+
     def close(self) -> None:
-        self.sensors.close()
-        self.backend.close()  # zeros on every wire, then the ports close
-        self.link.close()
+        """Stop every motor, then close the ports and the link; each step runs even if one
+        before it raises. Idempotent."""
+        try:
+            self.backend.close()  # zeros on every wire, then the ports close
+        finally:
+            try:
+                self.sensors.close()
+            finally:
+                self.link.close()
 
     def _truth_fields(self, full: bool = False) -> dict[str, Any]:
         w = self.world
@@ -344,18 +379,59 @@ class MirroredWorld:
         return self.layout_world.describe()
 
     def update(self, msg: Message) -> None:
-        self.time = float(msg["t"])
-        self.x, self.y, self.yaw = float(msg["x"]), float(msg["y"]), float(msg["yaw"])
-        self.lift_pos = float(msg["lift"])
-        self.bin_kg = float(msg["bin_kg"])
-        self.delivered_kg = float(msg["delivered_kg"])
-        self.spilled_kg = float(msg["spilled_kg"])
-        self.excavated_kg = float(msg["excavated_kg"])
-        self.collisions = int(msg["collisions"])
-        self.crater_entries = int(msg["crater_entries"])
+        """Take a `truth` (or `end`) message, checked whole first: a bad one changes
+        nothing and raises ValueError naming the field."""
+        v = {name: _finite(msg, name) for name in _TRUTH_FLOATS}
+        counts = {name: _count(msg, name) for name in _TRUTH_COUNTS}
+        logs = None
         if "collision_log" in msg:
-            self.collision_log = [(float(t), str(what)) for t, what in msg["collision_log"]]
-            self.crater_log = [(float(t), str(what)) for t, what in msg["crater_log"]]
+            logs = (_log(msg, "collision_log"), _log(msg, "crater_log"))
+        self.time = v["t"]
+        self.x, self.y, self.yaw = v["x"], v["y"], v["yaw"]
+        self.lift_pos = v["lift"]
+        self.bin_kg = v["bin_kg"]
+        self.delivered_kg = v["delivered_kg"]
+        self.spilled_kg = v["spilled_kg"]
+        self.excavated_kg = v["excavated_kg"]
+        self.collisions = counts["collisions"]
+        self.crater_entries = counts["crater_entries"]
+        if logs is not None:
+            self.collision_log, self.crater_log = logs
+
+
+_TRUTH_FLOATS = ("t", "x", "y", "yaw", "lift", "bin_kg", "delivered_kg", "spilled_kg",
+                 "excavated_kg")
+_TRUTH_COUNTS = ("collisions", "crater_entries")
+
+
+def _finite(msg: Message, name: str) -> float:
+    return _finite_value(msg.get(name), name)
+
+
+def _finite_value(value: Any, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) \
+            or not math.isfinite(value):
+        raise ValueError(f"truth: {name}: expected a finite number, got {value!r:.40}")
+    return float(value)
+
+
+def _count(msg: Message, name: str) -> int:
+    value = msg.get(name)
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ValueError(f"truth: {name}: expected a count, got {value!r:.40}")
+    return value
+
+
+def _log(msg: Message, name: str) -> list[tuple[float, str]]:
+    entries = msg.get(name)
+    if not isinstance(entries, list):
+        raise ValueError(f"truth: {name}: expected a list, got {entries!r:.40}")
+    out = []
+    for entry in entries:
+        if not (isinstance(entry, list) and len(entry) == 2 and isinstance(entry[1], str)):
+            raise ValueError(f"truth: {name}: expected [t, what], got {entry!r:.60}")
+        out.append((_finite_value(entry[0], f"{name}: t"), entry[1]))
+    return out
 
 
 class ArenaProcess:
@@ -376,6 +452,10 @@ class ArenaProcess:
         self.ready: Message | None = None
         self.ended: Message | None = None
         self.failed = ""
+        #: Why the child was lost before `finish` (empty while it was not), with its exit
+        #: status once `finish` knows it.
+        self.lost = ""
+        self._lost_why = ""
         self.finishing = False
         self.on_truth: Callable[[Message], None] | None = None
         self.on_lost: Callable[[str], None] | None = None
@@ -397,8 +477,8 @@ class ArenaProcess:
         deadline = time.monotonic() + timeout_s
         while self.ready is None:
             if self.failed or self.link.closed:
-                raise ArenaError(f"the simulator's process could not start: "
-                                 f"{self.failed or self._exit_status()}")
+                raise ArenaError(f"the simulator's process (pid {self.pid}) could not start: "
+                                 f"{self.failed or self._exit_status(wait_s=2.0)}")
             left = deadline - time.monotonic()
             if left <= 0:
                 raise ArenaError(f"the simulator's process (pid {self.pid}) was not ready "
@@ -427,21 +507,31 @@ class ArenaProcess:
                          f"{msg.get('why', '')}")
 
     def _closed(self, why: str) -> None:
+        """The link closed before `finish`. This runs inside the loop's I/O callback, so it
+        never waits for the child: `poll` says whether it is gone yet; if not (the parent
+        closed the link itself, or the child's exit is not reaped yet), `finish` adds its
+        exit status to `lost`."""
         if self.finishing or self.ended is not None or self.ready is None:
             return
+        self._lost_why = why
+        self.lost = self._lost_message(self.proc.poll(), by_itself=True)
         if self.on_lost is not None:
-            self.on_lost(f"the simulator's process (pid {self.pid}) is gone "
-                         f"({self._exit_status()}); the sensor link: {why}")
+            self.on_lost(self.lost)
 
-    def _exit_status(self, wait_s: float = 2.0) -> str:
+    def _lost_message(self, code: int | None, by_itself: bool) -> str:
+        who = f"the simulator's process (pid {self.pid})"
+        if code is not None and by_itself and code != 0:
+            return f"{who} is gone ({_status(code)}); the sensor link: {self._lost_why}"
+        text = f"{who} lost the sensor link: {self._lost_why}"
+        if code is not None:
+            text += f"; then it ended ({_status(code)})"
+        return text
+
+    def _exit_status(self, wait_s: float = 0.0) -> str:
         with contextlib.suppress(subprocess.TimeoutExpired):
             self.proc.wait(wait_s)
         code = self.proc.returncode
-        if code is None:
-            return "still running"
-        if code < 0:
-            return f"killed by {signal.Signals(-code).name}"
-        return f"exit status {code}"
+        return "still running" if code is None else _status(code)
 
     # -- the end -----------------------------------------------------------------------------
     def finish(self, end_timeout_s: float = END_TIMEOUT_S) -> Message | None:
@@ -457,22 +547,37 @@ class ArenaProcess:
                         and time.monotonic() < deadline:
                     self.link.pump(min(0.2, max(0.0, deadline - time.monotonic())))
             self.link.close()
-        self._reap()
+        by_itself = self._reap()
+        if self._lost_why:
+            self.lost = self._lost_message(self.proc.returncode, by_itself)
         return self.ended
 
-    def _reap(self) -> None:
+    def _reap(self) -> bool:
+        """See the child exit, signalling it if it does not; True when it exited by
+        itself."""
         if self.proc.poll() is not None:
-            return
+            return True
         with contextlib.suppress(subprocess.TimeoutExpired):
             self.proc.wait(EXIT_TIMEOUT_S)
-            return
+            return True
         log.warning("the simulator's process (pid %d) did not exit: SIGTERM", self.pid)
         self.proc.terminate()
         with contextlib.suppress(subprocess.TimeoutExpired):
             self.proc.wait(5.0)
-            return
+            return False
         self.proc.kill()
         self.proc.wait()
+        return False
+
+
+def _status(code: int) -> str:
+    """A child's exit, as `Popen.returncode` gives it, in words."""
+    if code >= 0:
+        return f"exit status {code}"
+    try:
+        return f"killed by {signal.Signals(-code).name}"
+    except ValueError:
+        return f"killed by signal {-code}"
 
 
 if __name__ == "__main__":

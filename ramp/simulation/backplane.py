@@ -212,6 +212,15 @@ class SimBackplane:
             self.signals.step(self._physics_dt)
             self._physics_dt = 0.0
 
+    def service_wire(self, now: float) -> None:
+        """Every emulated device reads what its wire carried, once, with no physics step
+        (after `Supervisor.shutdown`, whose zeros reach the emulators at the wire's pace)."""
+        for device in self.sabertooth.values():
+            device.service(now)
+            device.emulator.tick(now)
+        for service in self.services:
+            service(now)
+
     def _watch_ptys(self) -> None:
         """(Re)register each pty master with the loop: a replug opens a new one."""
         sched = self._scheduler
