@@ -34,6 +34,7 @@ where an operator can come), or `END_GRACE_S` after the run's time at the latest
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
@@ -152,6 +153,10 @@ class MissionRun:
         self.perception: Perception | None = None  # with the arena apart: the autonomy's
         self.backend_ticks: dict[str, Any] | None = None
         self._tick_log: TickLog | None = None
+        self._arena_lost_why = ""  # the error the lost child set, if it set it
+        #: With the arena apart: each motor's duty in the world once the child's backend
+        #: had shut down (from its `end`), None when no `end` came.
+        self.motors_at_end: dict[str, float] | None = None
 
     # -- the run ---------------------------------------------------------------------------------
     def build(self) -> None:
@@ -263,22 +268,37 @@ class MissionRun:
         self.stop_requested = True
 
     def close(self) -> None:
+        """Close the autonomy, then the rig or the backend, then (with the arena apart) the
+        perception and the simulator's process: every step runs even if one before it
+        raises, so the child never outlives a failed close."""
         if self._tick_log is not None:
             self.backend_ticks = self._tick_log.report()
             self._tick_log = None
-        if self.autonomy is not None:
-            self.autonomy.close()
-        if self.rig is not None:
-            self.rig.close()
-        elif self.backend is not None:
-            self.backend.close()
-        if self.arena is not None:
-            if self.perception is not None:
-                self.perception.close()
-            end = self.arena.finish()  # the child stops every motor and ends
-            if end is not None:
-                self._truth(end, sample=False)
-                self.backend_ticks = end.get("backend")
+        with contextlib.ExitStack() as steps:  # the callbacks run last first
+            if self.arena is not None:
+                steps.callback(self._finish_arena)
+                if self.perception is not None:
+                    steps.callback(self.perception.close)
+            if self.rig is not None:
+                steps.callback(self.rig.close)
+            elif self.backend is not None:
+                steps.callback(self.backend.close)
+            if self.autonomy is not None:
+                steps.callback(self.autonomy.close)
+
+    def _finish_arena(self) -> None:
+        assert self.arena is not None
+        end = self.arena.finish()  # the child stops every motor and ends
+        lost = self.arena.lost
+        if lost and self.error == self._arena_lost_why and lost != self.error:
+            log.error("%s", lost)  # now with the child's exit status
+            self.error = self._arena_lost_why = lost
+        if end is not None:
+            self._truth(end, sample=False)
+            self.backend_ticks = end.get("backend")
+            motors = end.get("motors")
+            if isinstance(motors, dict):
+                self.motors_at_end = {str(k): v for k, v in motors.items()}
 
     @property
     def arena_lost(self) -> bool:
@@ -288,7 +308,7 @@ class MissionRun:
     def _arena_lost(self, why: str) -> None:
         log.error("%s", why)
         if not self.error:
-            self.error = why
+            self.error = self._arena_lost_why = why
         self.request_stop()
 
     def _stop_robot(self) -> None:
@@ -360,6 +380,8 @@ class MissionRun:
                                 "backend": self.arena.pid if self.arena else os.getpid()}
             if self.backend_ticks is not None:
                 doc["backend_tick"] = self.backend_ticks
+            if self.arena is not None:
+                doc["motors_at_end"] = self.motors_at_end
         if self.error:
             doc["error"] = self.error
         return doc

@@ -155,8 +155,12 @@ def _mission(args: argparse.Namespace) -> int:
             if args.realtime and run.autonomy is None:
                 run.build()
         except ArenaError as exc:  # the simulator's process could not start (a port in use)
+            run.close()
             print(f"ramp sim mission: {exc}", file=sys.stderr)
             return 1
+        except BaseException:
+            run.close()  # a child already started must not outlive the command
+            raise
         if args.realtime:
             host, port = run.mcp_address
             print(f"ramp sim mission: running on the wall clock; MCP on {host}:{port} "

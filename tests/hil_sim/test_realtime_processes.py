@@ -16,6 +16,8 @@ Functional, not timing: `python -m bench --only realtime` measures the tick.
 
 from __future__ import annotations
 
+import contextlib
+import json
 import math
 import os
 import re
@@ -24,33 +26,41 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any, NoReturn
 
 import pytest
 
 from ramp.autonomy.config import ImuConfig
 from ramp.autonomy.hal.hokuyo import HokuyoLidar
-from ramp.autonomy.hal.simlink import SimLinkImu
+from ramp.autonomy.hal.simlink import SensorLink, SimLinkImu
 from ramp.clock import MonotonicClock
 from ramp.scheduler import Scheduler
-from ramp.simulation.arena_process import ArenaProcess
-from ramp.simulation.mission import MissionOptions
+from ramp.simulation.arena_process import Arena, ArenaProcess
+from ramp.simulation.backend import SimBackend
+from ramp.simulation.mission import MissionOptions, MissionRun
 from tests.harness import REPO, ask_line
 
+# Each test's waits, summed, fit in its timeout (a loaded 2-core machine: the child's start
+# alone has taken 20 s); the first test's add up to 195 s.
 pytestmark = pytest.mark.timeout(120)
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
 
 
 class Mission:
-    """`ramp sim mission --realtime --port 0 ARGS` as a process, its stdout read by line."""
+    """`ramp sim mission --realtime --port 0 ARGS` as a process, its stdout read by line;
+    on `started` (the test's cleanup) before anything can fail."""
 
-    def __init__(self, *args: str) -> None:
+    def __init__(self, started: list[Mission], *args: str) -> None:
+        self.child = 0
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "ramp.cli", "sim", "mission", "--realtime", "--port", "0",
              *args], cwd=REPO, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
             env=ENV)
+        started.append(self)
         self.lines: list[str] = []
         m = self.expect(r"MCP on ([\d.]+):(\d+)", 60)
         self.host, self.port = m.group(1), int(m.group(2))
@@ -86,7 +96,8 @@ def cleanup() -> Iterator[list[Mission]]:
     yield started
     for m in started:
         m.close()
-        with_gone(m.child)
+        if m.child:
+            with_gone(m.child)
 
 
 def with_gone(pid: int) -> None:
@@ -137,10 +148,10 @@ def wait_for(predicate: Callable[[], bool], timeout: float) -> bool:
     return predicate()
 
 
+@pytest.mark.timeout(240)
 def test_the_backend_runs_in_its_own_process_and_the_operator_can_take_over(
         cleanup: list[Mission]) -> None:
-    m = Mission("--duration", "120")
-    cleanup.append(m)
+    m = Mission(cleanup, "--duration", "120", "--json")
     assert m.parent == m.proc.pid and m.child != m.parent
     assert parent_of(m.child) == m.parent
     inode = listener_inode(m.port)
@@ -154,20 +165,26 @@ def test_the_backend_runs_in_its_own_process_and_the_operator_can_take_over(
         m.expect(r"-> paused", 10)
         assert ask_line(sock, "robot:control.release=()") == ""
         m.expect(r"paused -> acquire_control", 10)
+        # The operator drives, and the command is ended with the wheels turning: the child's
+        # shutdown must stop them (the autonomy, without control, sends no stop).
+        assert ask_line(sock, "robot:control.acquire=(operator)") == ""
+        assert ask_line(sock, "base:base.drive=(50,0)") == ""
+        m.proc.send_signal(signal.SIGTERM)
+        out, _err = m.proc.communicate(timeout=30)
     finally:
         sock.close()
-    m.proc.send_signal(signal.SIGTERM)
-    out, _err = m.proc.communicate(timeout=30)
-    assert '"outcome": "error"' not in out or "interrupted" in out
     assert "error         interrupted" in out
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert summary["outcome"] == "error" and summary["error"] == "interrupted"
+    motors = summary["motors_at_end"]
+    assert motors and set(motors.values()) == {0.0}, motors
     assert wait_for(lambda: not running(m.child), 10), "the simulator's process outlived us"
     with pytest.raises(OSError):
         socket.create_connection((m.host, m.port), timeout=2).close()
 
 
 def test_a_killed_simulator_ends_the_run_as_an_error_saying_so(cleanup: list[Mission]) -> None:
-    m = Mission("--duration", "120", "--json")
-    cleanup.append(m)
+    m = Mission(cleanup, "--duration", "120", "--json")
     m.expect(r"acquire_control -> initial_localization", 60)
     os.kill(m.child, signal.SIGKILL)
     out, err = m.proc.communicate(timeout=30)
@@ -179,8 +196,7 @@ def test_a_killed_simulator_ends_the_run_as_an_error_saying_so(cleanup: list[Mis
 
 
 def test_a_killed_parent_leaves_no_simulator_behind(cleanup: list[Mission]) -> None:
-    m = Mission("--duration", "120")
-    cleanup.append(m)
+    m = Mission(cleanup, "--duration", "120")
     os.kill(m.parent, signal.SIGKILL)
     m.proc.communicate(timeout=10)
     assert wait_for(lambda: not running(m.child), 15), "the simulator's process outlived us"
@@ -190,55 +206,62 @@ def test_a_killed_parent_leaves_no_simulator_behind(cleanup: list[Mission]) -> N
 
 def test_the_sim_module_reaches_the_emulators_in_the_simulators_process() -> None:
     arena = ArenaProcess(MissionOptions(realtime=True, port=0, duration=60.0))
-    clock = MonotonicClock()
-    sched = Scheduler(clock, 100.0)
-    lidar = HokuyoLidar(arena.lidar_url, clock=clock, loop=sched)
-    imu = SimLinkImu(ImuConfig(driver="simlink", data_interval_ms=8), link=arena.link)
-    mcp = socket.create_connection(arena.mcp_address, timeout=5)
-    try:
-        arena.attach(sched)
-        sched.add_task("lidar", 100.0, lidar.tick)
-        sched.add_task("imu", 100.0, imu.tick)
-        imu.open(clock.now())
-        lidar.start()
-        lidar.start_stream()
-
-        def run_until(done: Callable[[], bool], seconds: float) -> bool:
-            end = clock.now() + seconds
-            sched.run(lambda: done() or clock.now() >= end)
-            return done()
-
-        def gravity() -> tuple[float, float, float]:
-            imu.drain()
-            run_until(lambda: False, 0.3)
-            s = imu.drain()
-            n = len(s)
-            assert n > 10, "no IMU samples over the sensor link"
-            g = [sum(x.specific_force_g[i] for x in s) / n for i in range(3)]
-            return (g[0], g[1], g[2])
-
-        assert run_until(lambda: lidar.scans_received >= 3 and imu.ready(), 20)
-        scan = lidar.latest
-        assert scan is not None and int(scan.valid.sum()) > 500
-        before = gravity()
-        assert ask_line(mcp, "sim:lidar.blind=(1)") == ""
-        seen = lidar.scans_received
-        assert run_until(lambda: lidar.scans_received >= seen + 3, 5)
-        scan = lidar.latest
-        assert scan is not None and not scan.valid.any()
-        assert ask_line(mcp, "sim:imu.shift=(20)") == ""
-        run_until(lambda: False, 0.5)  # the mount turns in 0.2 s
-        after = gravity()
-        dot = sum(a * b for a, b in zip(before, after, strict=True))
-        norm = math.dist(before, (0, 0, 0)) * math.dist(after, (0, 0, 0))
-        assert math.degrees(math.acos(min(1.0, dot / norm))) == pytest.approx(20.0, abs=1.0)
-    finally:
-        mcp.close()
-        lidar.stop()
-        imu.close()
-        end = arena.finish()
+    with contextlib.ExitStack() as cleanup:
+        cleanup.callback(arena.finish)  # first: whatever fails next, the child ends
+        clock = MonotonicClock()
+        sched = Scheduler(clock, 100.0)
+        lidar = HokuyoLidar(arena.lidar_url, clock=clock, loop=sched)
+        cleanup.callback(lidar.stop)
+        imu = SimLinkImu(ImuConfig(driver="simlink", data_interval_ms=8), link=arena.link)
+        cleanup.callback(imu.close)
+        mcp = socket.create_connection(arena.mcp_address, timeout=5)
+        cleanup.callback(mcp.close)
+        sim_module_reaches_the_emulators(arena, clock, sched, lidar, imu, mcp)
+    end = arena.finish()
     assert end is not None and end["why"] == "the autonomy's process asked"
     assert arena.proc.returncode == 0
+
+
+def sim_module_reaches_the_emulators(arena: ArenaProcess, clock: MonotonicClock,
+                                     sched: Scheduler, lidar: HokuyoLidar, imu: SimLinkImu,
+                                     mcp: socket.socket) -> None:
+    """The `sim` module, served by the child's backend, reaches its emulators."""
+    arena.attach(sched)
+    sched.add_task("lidar", 100.0, lidar.tick)
+    sched.add_task("imu", 100.0, imu.tick)
+    imu.open(clock.now())
+    lidar.start()
+    lidar.start_stream()
+
+    def run_until(done: Callable[[], bool], seconds: float) -> bool:
+        end = clock.now() + seconds
+        sched.run(lambda: done() or clock.now() >= end)
+        return done()
+
+    def gravity() -> tuple[float, float, float]:
+        imu.drain()
+        run_until(lambda: False, 0.3)
+        s = imu.drain()
+        n = len(s)
+        assert n > 10, "no IMU samples over the sensor link"
+        g = [sum(x.specific_force_g[i] for x in s) / n for i in range(3)]
+        return (g[0], g[1], g[2])
+
+    assert run_until(lambda: lidar.scans_received >= 3 and imu.ready(), 20)
+    scan = lidar.latest
+    assert scan is not None and int(scan.valid.sum()) > 500
+    before = gravity()
+    assert ask_line(mcp, "sim:lidar.blind=(1)") == ""
+    seen = lidar.scans_received
+    assert run_until(lambda: lidar.scans_received >= seen + 3, 5)
+    scan = lidar.latest
+    assert scan is not None and not scan.valid.any()
+    assert ask_line(mcp, "sim:imu.shift=(20)") == ""
+    run_until(lambda: False, 0.5)  # the mount turns in 0.2 s
+    after = gravity()
+    dot = sum(a * b for a, b in zip(before, after, strict=True))
+    norm = math.dist(before, (0, 0, 0)) * math.dist(after, (0, 0, 0))
+    assert math.degrees(math.acos(min(1.0, dot / norm))) == pytest.approx(20.0, abs=1.0)
 
 
 def test_a_port_in_use_ends_the_command_saying_so() -> None:
@@ -253,5 +276,132 @@ def test_a_port_in_use_ends_the_command_saying_so() -> None:
     finally:
         busy.close()
     assert out.returncode == 1
-    assert ("ramp sim mission: the simulator's process could not start: OSError: [Errno 98] "
-            "Address already in use") in out.stderr
+    assert re.search(r"ramp sim mission: the simulator's process \(pid \d+\) could not "
+                     r"start: OSError: \[Errno 98\] Address already in use", out.stderr)
+
+
+# -- ends that go wrong: nothing is left running, every motor stops -----------------------------
+def broken(*args: object, **kwargs: object) -> NoReturn:
+    raise RuntimeError("broken on purpose")
+
+
+def test_a_child_that_fails_to_build_stops_and_closes_what_it_built(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    import ramp.simulation.backend
+    import ramp.simulation.rig
+
+    built: list[tuple[SimBackend, tuple[str, int]]] = []
+
+    class Recorded(SimBackend):
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            built.append((self, self.address))
+
+    monkeypatch.setattr(ramp.simulation.backend, "SimBackend", Recorded)
+    monkeypatch.setattr(ramp.simulation.rig, "SimSensors", broken)
+    a, b = socket.socketpair()
+    link = SensorLink(a)
+    try:
+        with pytest.raises(RuntimeError, match="broken on purpose"):
+            Arena(MissionOptions(realtime=True, port=0), link)
+    finally:
+        link.close()
+        b.close()
+    (backend, address), = built
+    assert backend.closed and not backend.supervisor.running
+    with pytest.raises(OSError):
+        socket.create_connection(address, timeout=2).close()
+
+
+def test_the_child_stops_every_motor_before_its_end_and_closes_all_if_a_step_fails(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    a, b = socket.socketpair()
+    arena = Arena(MissionOptions(realtime=True, port=0), SensorLink(a))
+    peer = SensorLink(b)
+    ends: list[dict[str, Any]] = []
+    peer.on("end", ends.append)
+    sensors_close = arena.sensors.close
+    mcp = socket.create_connection(arena.backend.address, timeout=5)
+    try:
+        said: list[str] = []
+        operator = threading.Thread(target=lambda: said.extend(
+            ask_line(mcp, line) for line in ("robot:control.acquire=(operator)",
+                                             "base:base.drive=(50,0)")))
+        operator.start()
+        arena.backend.scheduler.run_for(1.0)
+        operator.join(5)
+        assert said == ["", ""] and arena.world.duty("base.lf_wheel") > 0.3  # driving
+        events: list[str] = []
+        shutdown, send = arena.backend.supervisor.shutdown, arena.link.send
+        monkeypatch.setattr(arena.backend.supervisor, "shutdown",
+                            lambda: (events.append("shutdown"), shutdown())[1])
+        monkeypatch.setattr(arena.link, "send",
+                            lambda kind, **f: (events.append(kind), send(kind, **f))[1])
+        monkeypatch.setattr(arena.sensors, "close", broken)
+        arena.stop("the test")
+        with pytest.raises(RuntimeError, match="broken on purpose"):
+            arena.run()
+        assert events.index("shutdown") < events.index("end")
+        assert arena.backend.closed and arena.link.closed  # after the step that failed
+        for _ in range(10):
+            peer.pump(0.1)
+        (end,) = ends
+        assert end["why"] == "the test" and set(end["motors"].values()) == {0.0}
+    finally:
+        mcp.close()
+        peer.close()
+        sensors_close()
+
+
+def test_a_link_the_parent_closes_is_reported_at_once_and_the_exit_status_at_the_finish(
+        ) -> None:
+    arena = ArenaProcess(MissionOptions(realtime=True, port=0, duration=60.0))
+    try:
+        lost: list[str] = []
+        arena.on_lost = lost.append
+        t0 = time.monotonic()
+        arena.link.close("sensor link: not JSON: b'x'")  # as the link does on a bad line
+        assert time.monotonic() - t0 < 0.5  # never waits for the child on the loop
+        assert lost == [f"the simulator's process (pid {arena.pid}) lost the sensor link: "
+                        "sensor link: not JSON: b'x'"]
+    finally:
+        arena.finish()
+    assert arena.lost == lost[0] + "; then it ended (exit status 0)"
+
+
+def test_a_failure_after_the_child_started_leaves_no_child(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    import ramp.autonomy.hal.hokuyo
+    from ramp import cli
+
+    started: list[ArenaProcess] = []
+    init = ArenaProcess.__init__
+
+    def recorded(self: ArenaProcess, *args: Any, **kwargs: Any) -> None:
+        started.append(self)
+        init(self, *args, **kwargs)
+
+    monkeypatch.setattr(ArenaProcess, "__init__", recorded)
+    monkeypatch.setattr(ramp.autonomy.hal.hokuyo, "HokuyoLidar", broken)
+    try:
+        with pytest.raises(RuntimeError, match="broken on purpose"):
+            cli.main(["sim", "mission", "--realtime", "--port", "0", "--duration", "5"])
+        (arena,) = started
+        assert arena.proc.poll() is not None, "the command left its simulator running"
+    finally:
+        for arena in started:
+            arena.finish()
+
+
+def test_a_close_that_fails_still_ends_the_child(monkeypatch: pytest.MonkeyPatch) -> None:
+    run = MissionRun(MissionOptions(realtime=True, port=0, duration=5.0))
+    run.build()
+    assert run.arena is not None and run.autonomy is not None
+    try:
+        monkeypatch.setattr(run.autonomy, "close", broken)
+        with pytest.raises(RuntimeError, match="broken on purpose"):
+            run.close()
+        code = run.arena.proc.poll()
+    finally:
+        run.arena.finish()
+    assert code == 0, "the simulator's process was not told to end"
