@@ -518,3 +518,23 @@ def test_a_sample_that_cannot_be_sent_loses_only_itself(
     assert len(got) >= 110 and all(math.isfinite(s.t) for s in got)
     assert poisoned[0] not in [s.t for s in got] and b.server.not_finite >= 2
     assert "1 IMU samples not finite" in caplog.text
+
+
+def test_a_bad_truth_message_leaves_the_mirrored_world_as_it_was() -> None:
+    from types import SimpleNamespace
+
+    from ramp.simulation.arena_process import MirroredWorld
+
+    layout = SimpleNamespace(layout=None, start=None, start_pose=None, x=1.0, y=2.0, yaw=0.0,
+                             lift_pos=0.0)
+    world = MirroredWorld(layout)  # type: ignore[arg-type]
+    good = {"t": 5.0, "x": 3.0, "y": 4.0, "yaw": 0.5, "lift": 0.1, "bin_kg": 1.0,
+            "delivered_kg": 0.0, "spilled_kg": 0.0, "excavated_kg": 1.0, "collisions": 0,
+            "crater_entries": 0}
+    for bad in ({**good, "crater_entries": None}, {**good, "lift": "0.2"},
+                {**good, "collision_log": [[1.0, "rock"]], "crater_log": [["x", "c"]]}):
+        with pytest.raises(ValueError, match="truth: "):
+            world.update(bad)
+        assert (world.time, world.x, world.y, world.collision_log) == (0.0, 1.0, 2.0, [])
+    world.update({**good, "collision_log": [[1.0, "rock"]], "crater_log": []})
+    assert (world.time, world.x, world.collision_log) == (5.0, 3.0, [(1.0, "rock")])
