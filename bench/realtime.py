@@ -85,7 +85,7 @@ def _one(mode: str, extra: list[str], seconds: float, workdir: Path) -> dict[str
             if lines[-1].startswith("{"):
                 break
         t1 = time.monotonic()
-        summary = json.loads(lines[-1])
+        summary = summary_of(mode, lines)
     finally:
         mission.terminate(20)
         baseline = base.finish(t0, t1, 0.0)
@@ -103,6 +103,25 @@ def _one(mode: str, extra: list[str], seconds: float, workdir: Path) -> dict[str
         "states_visited": summary.get("states_visited"),
         "wall_s": summary.get("wall_time_s"),
     }
+
+
+def summary_of(mode: str, lines: list[str]) -> dict[str, Any]:
+    """The mission's JSON summary, its last line; ValueError naming `mode` and quoting what
+    came instead when there is none."""
+    last = lines[-1].strip() if lines else ""
+    if not last.startswith("{"):
+        raise ValueError(f"realtime: the {mode} mission printed no JSON summary; its last "
+                         f"line: {last[:200]!r}" if lines else
+                         f"realtime: the {mode} mission printed nothing")
+    try:
+        summary = json.loads(last)
+    except ValueError as exc:
+        raise ValueError(f"realtime: the {mode} mission's summary is not JSON ({exc}): "
+                         f"{last[:200]!r}") from exc
+    if not isinstance(summary, dict):
+        raise ValueError(f"realtime: the {mode} mission's summary is not an object: "
+                         f"{last[:200]!r}")
+    return summary
 
 
 def run(settings: Settings, workdir: Path) -> dict[str, Any]:

@@ -15,6 +15,7 @@ from bench import SECTIONS
 from bench.__main__ import parse_only
 from bench.command_to_wire import _match, value_sequence
 from bench.common import compare, summary
+from bench.realtime import summary_of
 from bench.report import render
 from bench.tick import window
 
@@ -167,3 +168,14 @@ def test_report_renders_every_section_as_markdown(smoke: dict[str, Any]) -> None
     for name in SECTIONS:
         assert f"**{name}**" in text
     assert "| idle: lateness p50 |" in text and "| start → ready, median |" in text
+
+
+@pytest.mark.parametrize(("lines", "what"), [
+    ([], "the apart mission printed nothing"),
+    (["ramp sim mission: running\n"], "the apart mission printed no JSON summary"),
+    (['{"outcome": "err\n'], "the apart mission's summary is not JSON"),
+])
+def test_a_realtime_run_without_a_summary_names_its_mode(lines: list[str], what: str) -> None:
+    with pytest.raises(ValueError, match=what):
+        summary_of("apart", lines)
+    assert summary_of("apart", ['{"outcome": "completed"}\n']) == {"outcome": "completed"}
