@@ -381,15 +381,23 @@ def test_a_line_nested_too_deeply_is_a_protocol_error_and_closes_the_link(
 
 
 def test_decoding_the_first_line_does_not_copy_the_backlog_behind_it() -> None:
-    import timeit
+    """Copying the whole buffer for each line made a burst cost its length squared (4,000
+    messages: 43 ms instead of 3 ms). Checked by what is sliced, not by timing it."""
+
+    class Watched(bytearray):
+        def __init__(self, data: bytes) -> None:
+            super().__init__(data)
+            self.slices: list[object] = []
+
+        def __getitem__(self, key: object) -> object:  # type: ignore[override]
+            self.slices.append(key)
+            return super().__getitem__(key)  # type: ignore[call-overload]
 
     line = encode("n", i=1)
-    short = bytearray(line * 2)
-    long = bytearray(line * (MAX_FRAME_BYTES // len(line)))  # a backlog of a megabyte
+    long = Watched(line * (MAX_FRAME_BYTES // len(line)))  # a backlog of a megabyte
     assert decode(long) == (len(line), {"k": "n", "i": 1})
-    t_short = min(timeit.repeat(lambda: decode(short), number=200, repeat=5))
-    t_long = min(timeit.repeat(lambda: decode(long), number=200, repeat=5))
-    assert t_long < 3 * t_short + 0.001, (t_short, t_long)  # copying it: 10 times as long
+    copied = [k.stop - (k.start or 0) for k in long.slices if isinstance(k, slice)]
+    assert copied and max(copied) <= len(line), copied
 
 
 def test_encoding_a_bad_field_names_the_kind_and_sending_it_names_the_link(
