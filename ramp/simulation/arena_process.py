@@ -299,6 +299,9 @@ class Arena:
             duty = {name: world.duty(name) for name in MOTORS}
             if not any(duty.values()) or time.monotonic() >= deadline:
                 break
+            # The loop has ended: nothing else runs in this process, and the emulators
+            # read the zeros off their ptys only as the bytes arrive. A short wait here
+            # is the whole of shutdown, bounded by STOP_SETTLE_S.
             time.sleep(0.01)
         backend.close()
         return duty

@@ -119,7 +119,34 @@ class SimServo(Servo):
                 ch.set_engaged(True)
 
 
-class SimPanTilt(PanTilt):
+class SimulatedGimbal(PanTilt):
+    """What both simulated gimbals (`SimPanTilt` here, `SimLinkPanTilt` over the sensor
+    link) do as their controller comes and goes; each axis has `_send_all`."""
+
+    def _follow_controller(self, axis: Any, there: bool, how: str = "") -> bool:
+        """One axis follows its controller's presence: on arrival every command is sent
+        again (what the controller forgot at its power-on) and the gimbal's fault clears
+        once both axes are back; on loss the axis forgets its position and the gimbal
+        faults (`_detached`). True while the axis is attached."""
+        if there and not axis.attached:
+            axis.attached = True
+            axis._send_all()
+            log.info("%s: simulated servo controller %s attached%s", self.name, axis.label,
+                     how)
+            if self.attached:
+                self._clear_fault()
+        elif not there and axis.attached:
+            axis.attached = False
+            axis.position_deg = None
+            self._set_fault(self._detached(axis))
+        return bool(axis.attached)
+
+    def _detached(self, axis: Any) -> DeviceError:
+        return DeviceError(self.name, f"simulated servo controller channel "
+                           f"{axis.config.channel} detached", axis.label)
+
+
+class SimPanTilt(SimulatedGimbal):
     driver_name = "sim"
 
     def __init__(self, config: GimbalConfig, name: str = "gimbal", *,
@@ -144,17 +171,7 @@ class SimPanTilt(PanTilt):
     def _tick(self, now: float, dt: float) -> None:
         there = self.emulator.attached
         for axis in self._axes():
-            if there and not axis.attached:
-                axis.attached = True
-                axis._send_all()
-                log.info("%s: simulated servo controller %s attached", self.name, axis.label)
-                if self.attached:
-                    self._clear_fault()
-            elif not there and axis.attached:
-                axis.attached = False
-                axis.position_deg = None
-                self._set_fault(self._detached(axis))
-            if not axis.attached:
+            if not self._follow_controller(axis, there):
                 continue
             for deg in axis.channel.take_reached():
                 axis._report_reached(deg)
@@ -162,10 +179,6 @@ class SimPanTilt(PanTilt):
                 pos = axis.channel.position_deg
                 if pos is not None:
                     axis._report_position(pos)
-
-    def _detached(self, axis: SimServo) -> DeviceError:
-        return DeviceError(self.name, f"simulated servo controller channel "
-                           f"{axis.config.channel} detached", axis.label)
 
     def _close(self) -> None:
         for axis in self._axes():

@@ -47,7 +47,8 @@ from collections.abc import Callable
 from typing import Any
 
 from ramp.autonomy.config import GimbalConfig, ImuConfig, ServoConfig
-from ramp.autonomy.hal.interfaces import Imu, ImuSample, PanTilt, Servo
+from ramp.autonomy.hal.interfaces import Imu, ImuSample, Servo
+from ramp.autonomy.hal.sim import SimulatedGimbal
 from ramp.common.tcpclient import IoLoop
 from ramp.errors import DeviceError, ProtocolError
 
@@ -427,7 +428,7 @@ class SimLinkServo(Servo):
                 self._send("engaged", True)
 
 
-class SimLinkPanTilt(PanTilt):
+class SimLinkPanTilt(SimulatedGimbal):
     """The simulated PhidgetAdvancedServo and its two servos, over the sensor link."""
 
     driver_name = "simlink"
@@ -486,18 +487,8 @@ class SimLinkPanTilt(PanTilt):
         there = self.link.connected and self._board
         for i, axis in enumerate(self._axes()):
             if there and not axis.attached:
-                axis.attached = True
                 self._reached[i].clear()  # news of what the old controller did
-                axis._send_all()
-                log.info("%s: simulated servo controller %s attached (sensor link)",
-                         self.name, axis.label)
-                if self.attached:
-                    self._clear_fault()
-            elif not there and axis.attached:
-                axis.attached = False
-                axis.position_deg = None
-                self._set_fault(self._detached(axis))
-            if not axis.attached:
+            if not self._follow_controller(axis, there, " (sensor link)"):
                 self._reached[i].clear()
                 continue
             reached, self._reached[i][:] = list(self._reached[i]), []
@@ -508,11 +499,10 @@ class SimLinkPanTilt(PanTilt):
                 if pos is not None:
                     axis._report_position(pos)
 
-    def _detached(self, axis: SimLinkServo) -> DeviceError:
+    def _detached(self, axis: Any) -> DeviceError:
         if not self.link.connected:
             return DeviceError(self.name, f"sensor link lost: {self.link.reason}", axis.label)
-        return DeviceError(self.name, f"simulated servo controller channel "
-                           f"{axis.config.channel} detached", axis.label)
+        return super()._detached(axis)
 
     def _close(self) -> None:
         for i, axis in enumerate(self._axes()):
