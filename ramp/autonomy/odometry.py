@@ -35,6 +35,7 @@ MOTOR_REF_VOLTAGE_V = 20.0  # firmware_like/marte_params.py motor_ref_voltage (A
 MAX_PIECE_S = 0.01  # integration step: the heading changes by < 0.5 deg in one at full spin
 
 Pose2 = tuple[float, float, float]
+_TWO_PI = 2.0 * math.pi
 
 
 def compose(a: Pose2, b: Pose2) -> Pose2:
@@ -70,6 +71,9 @@ class Odometry:
         self._times: deque[float] = deque([now])
         self._poses: deque[Pose2] = deque([self._pose])
         self.distance_m = 0.0  # path length driven, for diagnostics
+        #: (h, tau, decay, frac) of the last piece: the wheel lag of a step, kept while the
+        #: step and the time constant repeat (a pure function of the two).
+        self._lag = (math.nan, math.nan, 0.0, 0.0)
 
     # -- commands -----------------------------------------------------------------------------
     def command(self, now: float, speed: float, direction_deg: float) -> None:
@@ -112,27 +116,36 @@ class Odometry:
         for _ in range(pieces):
             self._piece(h)
         self._t = now
-        self._times.append(now)
-        self._poses.append(self._pose)
-        while len(self._times) > 2 and now - self._times[1] > self.history_s:
-            self._times.popleft()
-            self._poses.popleft()
+        times, poses = self._times, self._poses
+        times.append(now)
+        poses.append(self._pose)
+        history_s = self.history_s
+        while len(times) > 2 and now - times[1] > history_s:
+            times.popleft()
+            poses.popleft()
 
     def _piece(self, h: float) -> None:
         """Exact wheel lag over `h`; the mean wheel speed moves the body along the mid
         heading."""
         (l0, r0), (lt, rt) = self._wheels, self._target
-        decay = math.exp(-h / self.tau) if self.tau > 0.0 else 0.0
-        # Integral of target + (s0 - target) e^(-t/tau) over h, divided by h.
-        frac = (self.tau * (1.0 - decay) / h) if self.tau > 0.0 else 0.0
+        tau = self.tau
+        lag = self._lag
+        if lag[0] == h and lag[1] == tau:  # the same step as last time: the same numbers
+            decay, frac = lag[2], lag[3]
+        else:
+            decay = math.exp(-h / tau) if tau > 0.0 else 0.0
+            # Integral of target + (s0 - target) e^(-t/tau) over h, divided by h.
+            frac = (tau * (1.0 - decay) / h) if tau > 0.0 else 0.0
+            self._lag = (h, tau, decay, frac)
         l_mean = lt + (l0 - lt) * frac
         r_mean = rt + (r0 - rt) * frac
         self._wheels = (lt + (l0 - lt) * decay, rt + (r0 - rt) * decay)
-        v, w = self.model.body_velocity(l_mean * self.speed_scale, r_mean * self.speed_scale)
+        scale = self.speed_scale
+        v, w = self.model.body_velocity(l_mean * scale, r_mean * scale)
         x, y, yaw = self._pose
         mid = yaw + 0.5 * w * h
         self._pose = (x + v * math.cos(mid) * h, y + v * math.sin(mid) * h,
-                      math.remainder(yaw + w * h, 2.0 * math.pi))
+                      math.remainder(yaw + w * h, _TWO_PI))
         self.distance_m += abs(v) * h
 
     # -- what the localizer reads -------------------------------------------------------------
@@ -144,7 +157,13 @@ class Odometry:
     @property
     def moving(self) -> bool:
         """A wheel is commanded or still spinning down (more than 0.5 %)."""
-        return any(abs(v) > 0.5 for v in (*self._target, *self._wheels))
+        return self.is_moving()
+
+    def is_moving(self) -> bool:
+        """`moving` as a call (the AHRS's hook asks it for every IMU sample)."""
+        lt, rt = self._target
+        lw, rw = self._wheels
+        return abs(lt) > 0.5 or abs(rt) > 0.5 or abs(lw) > 0.5 or abs(rw) > 0.5
 
     def pose_at(self, t: float) -> Pose2:
         """The pose at clock time `t`, interpolated in the history (clamped to its ends)."""

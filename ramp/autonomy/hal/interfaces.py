@@ -42,8 +42,11 @@ MAX_VELOCITY_DPS = 2000.0
 MAX_ACCELERATION_DPS2 = 100000.0
 
 
+_NUMBER = (int, float)  # as `int | float`, made once (checked on every gimbal command)
+
+
 def _finite(value: object, what: str, label: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+    if isinstance(value, bool) or not isinstance(value, _NUMBER) or not math.isfinite(value):
         raise ValueError(f"{label}: {what} must be a finite number, got {value!r}")
     return float(value)
 

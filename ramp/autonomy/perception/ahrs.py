@@ -39,7 +39,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ramp.autonomy.hal.interfaces import Imu, ImuSample
+from ramp.autonomy.hal.interfaces import PHIDGET_ACCEL_SIGN, Imu, ImuSample
 from ramp.autonomy.mount import (
     IDENTITY,
     Mat3,
@@ -52,6 +52,7 @@ from ramp.autonomy.mount import (
 )
 
 Quat = tuple[float, float, float, float]  # (w, x, y, z), chassis -> world
+_RAD_PER_DEG = math.pi / 180.0  # as `ImuSample.gyro_rad_s` turns deg/s into rad/s
 
 
 @dataclass(frozen=True)
@@ -139,6 +140,12 @@ class Ahrs:
         self._to_chassis: Mat3 = self.mount_rotation
         self.moving = moving or (lambda: False)
         self._q: Quat = (1.0, 0.0, 0.0, 0.0)
+        #: `euler_from_quat` of the quaternion `_euler_of` (the one object, not an equal one):
+        #: the gimbal, the parked watch and the history all read the angles of one estimate.
+        self._euler_of: Quat | None = None
+        self._euler = (0.0, 0.0, 0.0)
+        self._consts: tuple[AhrsConfig, float, float] | None = None  # (config, quiet, limit)
+        self._parked_up: Vec3 = (0.0, 0.0, 1.0)  # up_in_chassis of `_parked_ref`'s angles
         self._bias = [0.0, 0.0, 0.0]  # rad/s, chassis axes
         self._bias_samples = 0.0  # seconds of stillness in the bias average so far
         self._started: float | None = None
@@ -160,20 +167,29 @@ class Ahrs:
     # -- what the rest reads ------------------------------------------------------------------
     @property
     def roll(self) -> float:
-        return euler_from_quat(self._q)[0]
+        return self.attitude[0]
 
     @property
     def pitch(self) -> float:
-        return euler_from_quat(self._q)[1]
+        return self.attitude[1]
 
     @property
     def yaw(self) -> float:
-        return euler_from_quat(self._q)[2]
+        return self.attitude[2]
 
     @property
     def attitude(self) -> tuple[float, float, float]:
         """(roll, pitch, yaw) in radians now."""
-        return euler_from_quat(self._q)
+        q = self._q
+        if q is not self._euler_of:
+            self._euler = euler_from_quat(q)
+            self._euler_of = q
+        return self._euler
+
+    def roll_pitch(self) -> tuple[float, float]:
+        """(roll, pitch) in radians now (what the gimbal levels on)."""
+        att = self.attitude
+        return att[0], att[1]
 
     @property
     def time(self) -> float | None:
@@ -278,20 +294,34 @@ class Ahrs:
             self._last_t = s.t
             self._first(s)
             return
-        h = s.t - self._last_t
+        t = s.t
+        h = t - self._last_t
         if h <= 0.0:
             return
-        self._last_t = s.t
-        m = self._to_chassis
-        f = mat_vec(m, s.specific_force_g)
-        g_raw = mat_vec(m, s.gyro_rad_s)
-        self._watch_stillness(s.t, h, f, g_raw)
-        wx, wy, wz = (g_raw[0] - self._bias[0], g_raw[1] - self._bias[1],
-                      g_raw[2] - self._bias[2])
-        n = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
+        self._last_t = t
+        # mat_vec of the chassis turn on the sample's specific force and rad/s, written out
+        # (the same products and sums; `ImuSample.specific_force_g`, `gyro_rad_s`).
+        (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = self._to_chassis
+        a0, a1, a2 = s.accel_g
+        sg = PHIDGET_ACCEL_SIGN
+        v0, v1, v2 = sg * a0, sg * a1, sg * a2
+        f0 = m00 * v0 + m01 * v1 + m02 * v2
+        f1 = m10 * v0 + m11 * v1 + m12 * v2
+        f2 = m20 * v0 + m21 * v1 + m22 * v2
+        d0, d1, d2 = s.gyro_dps
+        r = _RAD_PER_DEG
+        v0, v1, v2 = d0 * r, d1 * r, d2 * r
+        g0 = m00 * v0 + m01 * v1 + m02 * v2
+        g1 = m10 * v0 + m11 * v1 + m12 * v2
+        g2 = m20 * v0 + m21 * v1 + m22 * v2
+        n = math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
+        moving = self.moving()
+        self._watch_stillness(t, h, n, (g0, g1, g2), moving)
+        b = self._bias
+        wx, wy, wz = g0 - b[0], g1 - b[1], g2 - b[2]
+        qw, qx, qy, qz = self._q
         if n > 0.0 and abs(n - 1.0) < cfg.accel_gate_g:
-            ax, ay, az = f[0] / n, f[1] / n, f[2] / n
-            qw, qx, qy, qz = self._q
+            ax, ay, az = f0 / n, f1 / n, f2 / n
             vx = 2 * (qx * qz - qw * qy)  # up, seen from the chassis, as estimated
             vy = 2 * (qy * qz + qw * qx)
             vz = qw * qw - qx * qx - qy * qy + qz * qz
@@ -300,13 +330,20 @@ class Ahrs:
             wy += k * (az * vx - ax * vz)
             wz += k * (ax * vy - ay * vx)
         half = 0.5 * h
-        self._q = _q_norm(_q_mul(self._q, (1.0, wx * half, wy * half, wz * half)))
+        # _q_norm(_q_mul(q, (1, wx half, wy half, wz half))), written out.
+        bw, bx, by, bz = 1.0, wx * half, wy * half, wz * half
+        pw = qw * bw - qx * bx - qy * by - qz * bz
+        px = qw * bx + qx * bw + qy * bz - qz * by
+        py = qw * by - qx * bz + qy * bw + qz * bx
+        pz = qw * bz + qx * by - qy * bx + qz * bw
+        nq = math.sqrt(pw * pw + px * px + py * py + pz * pz)
+        self._q = (pw / nq, px / nq, py / nq, pz / nq)
         self.samples += 1
         if not self.settled and self._started is not None and (
-                self._still_total >= cfg.settle_s or s.t - self._started >= 3 * cfg.settle_s):
+                self._still_total >= cfg.settle_s or t - self._started >= 3 * cfg.settle_s):
             self.settled = True
-        self._record(s.t)
-        self._watch_parked(s.t)
+        self._record(t)
+        self._watch_parked(t, moving)
 
     # -- internals ------------------------------------------------------------------------------
     def _first(self, s: ImuSample) -> None:
@@ -324,12 +361,13 @@ class Ahrs:
         self._reset_history()
 
     def _record(self, t: float) -> None:
-        self._times.append(t)
-        self._atts.append(euler_from_quat(self._q))
+        times, atts = self._times, self._atts
+        times.append(t)
+        atts.append(self.attitude)
         horizon = t - self.config.history_s
-        while len(self._times) > 2 and self._times[1] < horizon:
-            self._times.popleft()
-            self._atts.popleft()
+        while len(times) > 2 and times[1] < horizon:
+            times.popleft()
+            atts.popleft()
 
     def _reset_history(self) -> None:
         """After a jump in the estimate, older entries would interpolate across it."""
@@ -338,14 +376,27 @@ class Ahrs:
             self._atts.clear()
             self._record(self._last_t)
 
-    def _watch_stillness(self, t: float, h: float, f: Vec3, g_raw: Vec3) -> None:
+    def _constants(self) -> tuple[float, float]:
+        """(quiet gyro limit, bias limit) in rad/s of the config now (made once per config)."""
         cfg = self.config
-        n = math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
-        quiet_limit = math.radians(cfg.still_gyro_dps)
+        consts = self._consts
+        if consts is None or consts[0] is not cfg:
+            consts = (cfg, math.radians(cfg.still_gyro_dps), math.radians(cfg.max_bias_dps))
+            self._consts = consts
+        return consts[1], consts[2]
+
+    def _watch_stillness(self, t: float, h: float, n: float, g_raw: Vec3,
+                         moving: bool) -> None:
+        """`n`: |specific force| of the sample in g; `moving`: the hook's answer for it."""
+        cfg = self.config
+        quiet_limit, limit = self._constants()
+        bias = self._bias
         # |f| averaged over about a second: steady (whatever its value) means no shaking.
         self._still_force += (n - self._still_force) * min(1.0, h / 1.0)
-        quiet = (not self.moving()
-                 and all(abs(g_raw[i] - self._bias[i]) < quiet_limit for i in range(3))
+        quiet = (not moving
+                 and abs(g_raw[0] - bias[0]) < quiet_limit
+                 and abs(g_raw[1] - bias[1]) < quiet_limit
+                 and abs(g_raw[2] - bias[2]) < quiet_limit
                  and abs(n - self._still_force) < cfg.still_accel_g)
         if not quiet:
             self._still_since = None
@@ -358,25 +409,27 @@ class Ahrs:
         # Running mean at first, then an exponential average with time constant bias_tau_s.
         self._bias_samples += h
         k = h / min(self._bias_samples, cfg.bias_tau_s)
-        limit = math.radians(cfg.max_bias_dps)
         for i in range(3):
-            b = self._bias[i] + (g_raw[i] - self._bias[i]) * k
-            self._bias[i] = max(-limit, min(limit, b))
+            b = bias[i] + (g_raw[i] - bias[i]) * k
+            bias[i] = max(-limit, min(limit, b))
         if self._bias_samples > cfg.settle_s and abs(self._still_force - 1.0) > \
                 cfg.gravity_tolerance_g:
             self._flag(f"gravity reads {self._still_force:.3f} g while still")
 
-    def _watch_parked(self, t: float) -> None:
-        """A parked chassis does not tilt: an attitude jump then is the IMU moving."""
-        if not self.settled or self.moving():
+    def _watch_parked(self, t: float, moving: bool) -> None:
+        """A parked chassis does not tilt: an attitude jump then is the IMU moving.
+        `moving`: the hook's answer for this sample."""
+        if not self.settled or moving:
             self._parked_ref = None
             return
         roll, pitch, _ = self.attitude
-        if self._parked_ref is None:
+        ref = self._parked_ref
+        if ref is None:
             self._parked_ref = (t, roll, pitch)
+            self._parked_up = up_in_chassis(roll, pitch)
             return
-        _, r0, p0 = self._parked_ref
-        before, now = up_in_chassis(r0, p0), up_in_chassis(roll, pitch)
+        _, r0, p0 = ref
+        before, now = self._parked_up, up_in_chassis(roll, pitch)
         jump = math.degrees(angle_between(before, now))
         if jump < self.config.parked_jump_deg:
             return
@@ -388,6 +441,7 @@ class Ahrs:
         self._q = quat_from_euler(r0, p0, yaw)
         self._reset_history()
         self._parked_ref = (t, r0, p0)
+        self._parked_up = before
 
     def _fold(self, seen: Vec3, truth: Vec3, share: float, why: str) -> None:
         """Turn the IMU's readings so that `seen` up becomes `truth` up (chassis frame)."""

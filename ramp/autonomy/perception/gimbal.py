@@ -35,6 +35,7 @@ from ramp.autonomy.mount import Mount
 log = logging.getLogger("ramp.autonomy.gimbal")
 
 Attitude = Callable[[], tuple[float, float]]  # (roll, pitch) of the chassis, rad
+_TWO_PI = 2 * math.pi
 
 
 def servo_tilt_for(elevation_down: float, roll: float, pitch: float, pan: float,
@@ -49,20 +50,26 @@ def servo_tilt_for(elevation_down: float, roll: float, pitch: float, pan: float,
     form. Of the two solutions the one nearest `near` is returned; when none exists (a tilt
     beyond reach) the one that comes closest.
     """
-    m = (1.0, 0.0, 0.0) if lidar_rotation is None else (
-        lidar_rotation[0][0], lidar_rotation[1][0], lidar_rotation[2][0])
-    up = (-math.sin(pitch), math.cos(pitch) * math.sin(roll), math.cos(pitch) * math.cos(roll))
+    if lidar_rotation is None:
+        m0, m1, m2 = 1.0, 0.0, 0.0
+    else:
+        m0, m1, m2 = lidar_rotation[0][0], lidar_rotation[1][0], lidar_rotation[2][0]
+    # up = up_in_chassis(roll, pitch), written out (one cos of the pitch, the same value).
+    cos_p = math.cos(pitch)
+    u0, u1, u2 = -math.sin(pitch), cos_p * math.sin(roll), cos_p * math.cos(roll)
     c, s = math.cos(pan), math.sin(pan)
-    v = (c * up[0] + s * up[1], -s * up[0] + c * up[1], up[2])  # up in the panned frame
-    p_ = v[0] * m[0] + v[2] * m[2]
-    q_ = v[0] * m[2] - v[2] * m[0]
-    k_ = v[1] * m[1]
+    v0, v1, v2 = c * u0 + s * u1, -s * u0 + c * u1, u2  # up in the panned frame
+    p_ = v0 * m0 + v2 * m2
+    q_ = v0 * m2 - v2 * m0
+    k_ = v1 * m1
     r = math.hypot(p_, q_)
     phi = math.atan2(q_, p_)
     ratio = (-math.sin(elevation_down) - k_) / r if r > 0.0 else 0.0
     spread = math.acos(max(-1.0, min(1.0, ratio)))
-    roots = (phi + spread, phi - spread)
-    return min((math.remainder(x, 2 * math.pi) for x in roots), key=lambda x: abs(x - near))
+    # The root nearest `near`, the first on a tie (as min() over the two would pick).
+    first = math.remainder(phi + spread, _TWO_PI)
+    second = math.remainder(phi - spread, _TWO_PI)
+    return second if abs(second - near) < abs(first - near) else first
 
 
 class GimbalLeveller:

@@ -30,10 +30,8 @@ class Perception:
         self.imu = imu
         self.pan_tilt = pan_tilt
         self.odometry = Odometry(now=now)
-        self.ahrs = Ahrs(imu, config.imu.mount, ahrs_config,
-                         moving=lambda: self.odometry.moving)
-        self.leveller = GimbalLeveller(pan_tilt, lambda: (self.ahrs.roll, self.ahrs.pitch),
-                                       config.lidar.mount)
+        self.ahrs = Ahrs(imu, config.imu.mount, ahrs_config, moving=self.odometry.is_moving)
+        self.leveller = GimbalLeveller(pan_tilt, self.ahrs.roll_pitch, config.lidar.mount)
         self.scans = ScanCollector(lidar, pan_tilt, self.ahrs, config.lidar.mount,
                                    config.gimbal.pivot)
         self.tasks: list[ScheduledTask] = []
