@@ -202,10 +202,11 @@ class Imu(Device):
 
     def tick(self, now: float, dt: float) -> None:
         super().tick(now, dt)
-        if (self.is_open and self._attached and self._last_sample_at is not None
-                and now - self._last_sample_at > self.silence_timeout_s and self.fault is None):
+        last = self._last_sample_at
+        if (last is not None and self.fault is None and self.is_open and self._attached
+                and now - last > self.silence_timeout_s):
             self._set_fault(DeviceError(
-                self.name, f"attached but no sample for {now - self._last_sample_at:.2f} s "
+                self.name, f"attached but no sample for {now - last:.2f} s "
                 f"(data interval {self.data_interval_ms} ms)"))
 
     # -- for drivers ------------------------------------------------------------------------
@@ -217,6 +218,21 @@ class Imu(Device):
         self._buffer.append(sample)
         self.latest = sample
         self.received += 1
+        self._last_sample_at = now
+        if self.fault is not None and self._attached:
+            self._clear_fault()
+
+    def _accept_all(self, samples: list[ImuSample], now: float) -> None:
+        """A driver hands over the samples of a tick, oldest first (as `_accept` on each)."""
+        buffer = self._buffer
+        room = self.MAX_BUFFER
+        for sample in samples:
+            if len(buffer) >= room:
+                buffer.popleft()
+                self.dropped += 1
+            buffer.append(sample)
+        self.latest = samples[-1]
+        self.received += len(samples)
         self._last_sample_at = now
         if self.fault is not None and self._attached:
             self._clear_fault()

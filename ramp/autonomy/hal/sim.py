@@ -72,9 +72,10 @@ class SimImu(Imu):
             self._detach("simulated PhidgetSpatial detached")
         if not self._attached:
             return
-        for s in emu.poll():
-            self._accept(ImuSample(t=s.t, timestamp_ms=s.timestamp_ms, accel_g=s.acceleration,
-                                   gyro_dps=s.angular_rate, mag_gauss=s.magnetic_field), now)
+        polled = emu.poll()
+        if polled:
+            self._accept_all([ImuSample(s.t, s.timestamp_ms, s.acceleration, s.angular_rate,
+                                        s.magnetic_field) for s in polled], now)
 
     def _zero_gyro(self) -> None:
         self.emulator.zero_gyro()
@@ -171,12 +172,15 @@ class SimPanTilt(SimulatedGimbal):
     def _tick(self, now: float, dt: float) -> None:
         there = self.emulator.attached
         for axis in self._axes():
-            if not self._follow_controller(axis, there):
+            if axis.attached != there:  # arrived or lost (otherwise nothing to follow)
+                self._follow_controller(axis, there)
+            if not axis.attached:
                 continue
-            for deg in axis.channel.take_reached():
+            channel = axis.channel
+            for deg in channel.take_reached():
                 axis._report_reached(deg)
             if axis.engaged:
-                pos = axis.channel.position_deg
+                pos = channel.position_deg
                 if pos is not None:
                     axis._report_position(pos)
 
