@@ -142,6 +142,7 @@ class Mission:
         self.visited: dict[str, int] = {}
         self.last_change: StateChange | None = None
         self._model = _Model()
+        self._triggers_of: dict[str, frozenset[str]] = {}  # what each state accepts
         self.machine = Machine(
             model=self._model,
             states=[{"name": s.name, "final": s.name == FINAL} for s in STATES],
@@ -397,7 +398,12 @@ class Mission:
         self._model.trigger(trigger, reason=reason)  # type: ignore[attr-defined]
 
     def _accepts(self, trigger: str) -> bool:
-        return trigger in self.machine.get_triggers(self.state)
+        state = self.state
+        triggers = self._triggers_of.get(state)
+        if triggers is None:  # the table is fixed once the machine is built: ask once a state
+            triggers = frozenset(self.machine.get_triggers(state))
+            self._triggers_of[state] = triggers
+        return trigger in triggers
 
     def _start_activity(self, state: str, now: float) -> None:
         factory = self.executive.factory(state)

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ramp.autonomy.planning.geometry import Pose, wrap_angle
-from ramp.autonomy.planning.path import Path, corner_indices
+from ramp.autonomy.planning.path import FloatArray, Path, corner_indices
 from ramp.autonomy.robot_model import MARTE, RobotModel, drive_command
 
 FOLLOWING, TURNING, DONE, OFF_PATH = "following", "turning", "done", "off_path"
@@ -84,6 +84,8 @@ class PathFollower:
         self._turning = True  # line up with the first stretch before moving
         self._final_turn = len(self._corners) < 2
         self.status = FOLLOWING
+        self._kept: tuple[int, list[FloatArray], tuple[FloatArray, float, FloatArray, float,
+                                                       float, bool]] | None = None
 
     @property
     def done(self) -> bool:
@@ -96,20 +98,17 @@ class PathFollower:
         if self._final_turn:
             return self._turn_to_final(pose)
         cfg = self.config
-        a, b = self._corners[self._stretch], self._corners[self._stretch + 1]
-        seg = b - a
-        seg_len = float(math.hypot(seg[0], seg[1]))
-        u = seg / seg_len
-        rel = np.array([pose.x, pose.y]) - a
+        a, seg_len, u, seg_dir, rest, stops = self._geometry()
+        here = np.array([pose.x, pose.y])
+        rel = here - a
         along = float(rel @ u)
         cross = float(u[0] * rel[1] - u[1] * rel[0])
-        remaining = self._remaining(along, seg_len)
+        remaining = max(0.0, seg_len - along) + rest
         if along >= seg_len - cfg.goal_tolerance_m:
             return self._arrive(pose, cross, remaining)
         if abs(cross) > cfg.off_path_m:
             self.status = OFF_PATH
             return DriveCommand(0, 0.0, OFF_PATH, cross, remaining)
-        seg_dir = math.atan2(float(u[1]), float(u[0]))
         motion_yaw = wrap_angle(pose.yaw + math.pi) if self.path.reverse else pose.yaw
         err = wrap_angle(seg_dir - motion_yaw)
         if self._turning and abs(err) <= cfg.turn_done_rad:
@@ -120,11 +119,11 @@ class PathFollower:
             return self._spin(err, cross, remaining)
         # Pure pursuit on the stretch's line, in the frame of the direction of motion.
         target = a + u * (along + cfg.lookahead_m)
-        d = target - np.array([pose.x, pose.y])
+        d = target - here
         c, s = math.cos(motion_yaw), math.sin(motion_yaw)
         lx, ly = c * d[0] + s * d[1], -s * d[0] + c * d[1]
         curvature = 2.0 * ly / max(lx * lx + ly * ly, 1e-9)
-        to_stop = seg_len - along if self._stops_after(self._stretch) else math.inf
+        to_stop = seg_len - along if stops else math.inf
         pct = cfg.max_speed_pct
         if to_stop < cfg.slow_down_m:
             pct = max(cfg.min_speed_pct, cfg.max_speed_pct * to_stop / cfg.slow_down_m)
@@ -139,11 +138,32 @@ class PathFollower:
         return self._command(left, right, FOLLOWING, cross, remaining)
 
     # -- pieces --------------------------------------------------------------------------------
-    def _remaining(self, along: float, seg_len: float) -> float:
-        rest = sum(float(np.hypot(*(q - p))) for p, q in
+    def _geometry(self) -> tuple[FloatArray, float, FloatArray, float, float, bool]:
+        """(start corner, length, unit direction, its heading, the path's length after
+        this stretch, whether the robot stops at its end) of the current stretch: worked out
+        once when the stretch begins (they depend on the corners and the stretch alone)."""
+        k, corners = self._stretch, self._corners
+        kept = self._kept
+        if kept is not None and kept[0] == k and kept[1] is corners:
+            return kept[2]
+        a, b = corners[k], corners[k + 1]
+        seg = b - a
+        seg_len = float(math.hypot(seg[0], seg[1]))
+        u = seg / seg_len
+        rest = self._rest()
+        geometry = (a, seg_len, u, math.atan2(float(u[1]), float(u[0])), rest,
+                    self._stops_after(k))
+        self._kept = (k, corners, geometry)
+        return geometry
+
+    def _rest(self) -> float:
+        """The path's length after the current stretch."""
+        return sum(float(np.hypot(*(q - p))) for p, q in
                    zip(self._corners[self._stretch + 1:], self._corners[self._stretch + 2:],
                        strict=False))
-        return max(0.0, seg_len - along) + rest
+
+    def _remaining(self, along: float, seg_len: float) -> float:
+        return max(0.0, seg_len - along) + self._rest()
 
     def _stops_after(self, k: int) -> bool:
         """True when the robot must stop at the end of stretch k: the end, or any corner it
