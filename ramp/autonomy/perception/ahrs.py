@@ -316,7 +316,22 @@ class Ahrs:
         g2 = m20 * v0 + m21 * v1 + m22 * v2
         n = math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
         moving = self.moving()
-        self._watch_stillness(t, h, n, (g0, g1, g2), moving)
+        # Stillness: quiet gyro, steady |f| (averaged over about a second: steady, whatever
+        # its value, means no shaking) and wheels at rest; a still sample feeds the bias.
+        consts = self._consts
+        if consts is None or consts[0] is not cfg:
+            consts = self._make_constants()
+        quiet_limit = consts[1]
+        b = self._bias
+        hs = h / 1.0
+        sf = self._still_force
+        sf += (n - sf) * (hs if hs < 1.0 else 1.0)  # min(1.0, h / 1.0)
+        self._still_force = sf
+        if (not moving and abs(g0 - b[0]) < quiet_limit and abs(g1 - b[1]) < quiet_limit
+                and abs(g2 - b[2]) < quiet_limit and abs(n - sf) < cfg.still_accel_g):
+            self._take_still(t, h, g0, g1, g2, consts[2])
+        else:
+            self._still_since = None
         b = self._bias
         wx, wy, wz = g0 - b[0], g1 - b[1], g2 - b[2]
         qw, qx, qy, qz = self._q
@@ -342,8 +357,21 @@ class Ahrs:
         if not self.settled and self._started is not None and (
                 self._still_total >= cfg.settle_s or t - self._started >= 3 * cfg.settle_s):
             self.settled = True
-        self._record(t)
-        self._watch_parked(t, moving)
+        # _record(t), written out.
+        q = self._q
+        att = euler_from_quat(q)
+        self._euler_of, self._euler = q, att
+        times, atts = self._times, self._atts
+        times.append(t)
+        atts.append(att)
+        horizon = t - cfg.history_s
+        while len(times) > 2 and times[1] < horizon:
+            times.popleft()
+            atts.popleft()
+        if not self.settled or moving:
+            self._parked_ref = None
+        else:
+            self._watch_parked(t, att)
 
     # -- internals ------------------------------------------------------------------------------
     def _first(self, s: ImuSample) -> None:
@@ -376,31 +404,18 @@ class Ahrs:
             self._atts.clear()
             self._record(self._last_t)
 
-    def _constants(self) -> tuple[float, float]:
-        """(quiet gyro limit, bias limit) in rad/s of the config now (made once per config)."""
+    def _make_constants(self) -> tuple[AhrsConfig, float, float]:
+        """(config, quiet gyro limit, bias limit) in rad/s, made once per config."""
         cfg = self.config
-        consts = self._consts
-        if consts is None or consts[0] is not cfg:
-            consts = (cfg, math.radians(cfg.still_gyro_dps), math.radians(cfg.max_bias_dps))
-            self._consts = consts
-        return consts[1], consts[2]
+        consts = (cfg, math.radians(cfg.still_gyro_dps), math.radians(cfg.max_bias_dps))
+        self._consts = consts
+        return consts
 
-    def _watch_stillness(self, t: float, h: float, n: float, g_raw: Vec3,
-                         moving: bool) -> None:
-        """`n`: |specific force| of the sample in g; `moving`: the hook's answer for it."""
+    def _take_still(self, t: float, h: float, g0: float, g1: float, g2: float,
+                    limit: float) -> None:
+        """A still sample (gyro g0..g2 in rad/s, chassis axes): the still clocks run, and
+        once still long enough the gyro bias averages toward it (clipped to `limit`)."""
         cfg = self.config
-        quiet_limit, limit = self._constants()
-        bias = self._bias
-        # |f| averaged over about a second: steady (whatever its value) means no shaking.
-        self._still_force += (n - self._still_force) * min(1.0, h / 1.0)
-        quiet = (not moving
-                 and abs(g_raw[0] - bias[0]) < quiet_limit
-                 and abs(g_raw[1] - bias[1]) < quiet_limit
-                 and abs(g_raw[2] - bias[2]) < quiet_limit
-                 and abs(n - self._still_force) < cfg.still_accel_g)
-        if not quiet:
-            self._still_since = None
-            return
         if self._still_since is None:
             self._still_since = t
         self._still_total += h
@@ -409,20 +424,20 @@ class Ahrs:
         # Running mean at first, then an exponential average with time constant bias_tau_s.
         self._bias_samples += h
         k = h / min(self._bias_samples, cfg.bias_tau_s)
-        for i in range(3):
-            b = bias[i] + (g_raw[i] - bias[i]) * k
-            bias[i] = max(-limit, min(limit, b))
+        bias = self._bias
+        low = -limit
+        for i, g in ((0, g0), (1, g1), (2, g2)):
+            v = bias[i] + (g - bias[i]) * k
+            v = v if v < limit else limit  # min(limit, v)
+            bias[i] = v if v > low else low  # max(-limit, ...)
         if self._bias_samples > cfg.settle_s and abs(self._still_force - 1.0) > \
                 cfg.gravity_tolerance_g:
             self._flag(f"gravity reads {self._still_force:.3f} g while still")
 
-    def _watch_parked(self, t: float, moving: bool) -> None:
-        """A parked chassis does not tilt: an attitude jump then is the IMU moving.
-        `moving`: the hook's answer for this sample."""
-        if not self.settled or moving:
-            self._parked_ref = None
-            return
-        roll, pitch, _ = self.attitude
+    def _watch_parked(self, t: float, att: tuple[float, float, float]) -> None:
+        """A parked chassis (settled, wheels at rest) does not tilt: an attitude jump then is
+        the IMU moving. `att`: the attitude just recorded."""
+        roll, pitch, _ = att
         ref = self._parked_ref
         if ref is None:
             self._parked_ref = (t, roll, pitch)
