@@ -46,6 +46,8 @@ _NUMBER = (int, float)  # as `int | float`, made once (checked on every gimbal c
 
 
 def _finite(value: object, what: str, label: str) -> float:
+    if type(value) is float and math.isfinite(value):  # the usual case, checked first
+        return value
     if isinstance(value, bool) or not isinstance(value, _NUMBER) or not math.isfinite(value):
         raise ValueError(f"{label}: {what} must be a finite number, got {value!r}")
     return float(value)
@@ -287,8 +289,8 @@ class Servo(ABC):
 
     def clamp(self, deg: float) -> float:
         """`deg` moved inside this axis's limits (for callers that prefer to saturate)."""
-        lo, hi = self.limits
-        return min(hi, max(lo, _finite(deg, "angle", self.label)))
+        cfg = self.config  # `limits`, read without making the pair
+        return min(cfg.max_deg, max(cfg.min_deg, _finite(deg, "angle", self.label)))
 
     def set_target(self, deg: float) -> None:
         deg = self.check_target(deg)
