@@ -211,7 +211,7 @@ class Mission:
 
     @property
     def over(self) -> bool:
-        return self.state == FINAL
+        return self._model.state == FINAL  # asked after every tick of a simulated run
 
     @property
     def outcome(self) -> str:

@@ -93,7 +93,14 @@ class Scan:
     @cached_property
     def angles(self) -> FloatArray:
         """Bearing of each element of `ranges`, radians counter-clockwise from ahead."""
-        return self.geometry.angles(self.first_step, self.last_step, self.cluster)
+        key = (self.geometry, self.first_step, self.last_step, self.cluster)
+        angles = _ANGLES.get(key)
+        if angles is None:  # the same for every scan of a stream: made once, copied out
+            angles = self.geometry.angles(self.first_step, self.last_step, self.cluster)
+            if len(_ANGLES) >= 64:
+                _ANGLES.clear()
+            _ANGLES[key] = angles
+        return angles.copy()
 
     @property
     def steps(self) -> IntArray:
@@ -129,6 +136,10 @@ class Scan:
 
 
 ScanListener = Callable[[Scan], None]
+
+#: `ScanGeometry.angles` by (geometry, first, last, cluster): a pure function of the four,
+#: asked for every scan (each gets its own copy, so nobody can change another's).
+_ANGLES: dict[tuple[ScanGeometry, int, int, int], FloatArray] = {}
 
 
 class Lidar(ABC):

@@ -74,15 +74,17 @@ class ScanCollector:
     def tick(self, now: float, dt: float) -> None:
         """Sample the gimbal's reported angles (for scans that arrive later)."""
         pan, tilt = self.pan_tilt.angles()
+        times, angles = self._times, self._angles
         if pan is None or tilt is None:
-            self._times.clear()
-            self._angles.clear()
+            times.clear()
+            angles.clear()
             return
-        self._times.append(now)
-        self._angles.append((pan, tilt))
-        while len(self._times) > 2 and now - self._times[1] > self.history_s:
-            self._times.popleft()
-            self._angles.popleft()
+        times.append(now)
+        angles.append((pan, tilt))
+        history_s = self.history_s
+        while len(times) > 2 and now - times[1] > history_s:
+            times.popleft()
+            angles.popleft()
 
     def angles_at(self, t: float) -> tuple[float, float] | None:
         """(pan, tilt) in degrees reported at clock time `t`, interpolated; None if unknown."""

@@ -118,6 +118,7 @@ def dijkstra(blocked: NDArray[np.bool_], cost: NDArray[np.float64],
     cst: list[float] = cost.ravel().tolist()
     dist = [math.inf] * (nx * ny)
     s = source[0] * ny + source[1]
+    heappush = heapq.heappush
     if not blk[s]:
         dist[s] = 0.0
         heap: list[tuple[float, int]] = [(0.0, s)]
@@ -125,11 +126,20 @@ def dijkstra(blocked: NDArray[np.bool_], cost: NDArray[np.float64],
             d, cur = heapq.heappop(heap)
             if d > dist[cur]:
                 continue
-            for n, length in _neighbours(nx, ny, blk, cur):
-                new = d + length * 0.5 * (cst[cur] + cst[n])
+            # `_neighbours(nx, ny, blk, cur)` written out (the same cells in the same order).
+            i, j = divmod(cur, ny)
+            c_cur = cst[cur]
+            for di, dj, length in MOVES:
+                a, b = i + di, j + dj
+                if not (0 <= a < nx and 0 <= b < ny):
+                    continue
+                n = a * ny + b
+                if blk[n] or (di and dj and (blk[a * ny + j] or blk[i * ny + b])):
+                    continue
+                new = d + length * 0.5 * (c_cur + cst[n])
                 if new < dist[n]:
                     dist[n] = new
-                    heapq.heappush(heap, (new, n))
+                    heappush(heap, (new, n))
     return np.array(dist, dtype=float).reshape(nx, ny)
 
 
