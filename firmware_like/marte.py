@@ -534,9 +534,7 @@ class MarteWorld:
         self.x += v * math.cos(mid) * dt
         self.y += v * math.sin(mid) * dt
         self.heading = math.remainder(self.heading + yaw_rate * dt, 2.0 * math.pi)
-        self._clamp_to_arena()
-        if self.floor.rocks:
-            self._push_off_rocks()
+        self.floor.hold(self)  # `_clamp_to_arena`, then `_push_off_rocks` among rocks
         self._update_contacts(count=True)
         self._update_attitude()
         self._update_imu(dt, x0, y0, z0, yaw0, roll0, pitch0)
