@@ -92,6 +92,16 @@ class ImuTruth(NamedTuple):
     angular_velocity: tuple[float, float, float]
     linear_acceleration: tuple[float, float, float]
 
+    # The names the IMU emulator's truth contract reads (`firmware_like.imu`), so the world's
+    # own truth serves it with no adapter.
+    @property
+    def omega_body(self) -> tuple[float, float, float]:
+        return self.angular_velocity
+
+    @property
+    def accel_body(self) -> tuple[float, float, float]:
+        return self.linear_acceleration
+
 
 class ChassisPose(NamedTuple):
     """Where the chassis is: footprint centre (x, y) and the height z (m) of the plane under

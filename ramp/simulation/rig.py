@@ -89,18 +89,6 @@ def shift_window(run_length_s: float) -> tuple[float, float]:
     return (0.1 * run_length_s, 0.9 * run_length_s)
 
 
-class ImuTruthAdapter:
-    """The world's `ImuTruth` under the names the IMU emulator reads."""
-
-    __slots__ = ("roll", "pitch", "yaw", "omega_body", "accel_body")
-
-    def __init__(self, world: MarteWorld) -> None:
-        t = world.imu_truth()
-        self.roll, self.pitch, self.yaw = t.roll, t.pitch, t.yaw
-        self.omega_body = t.angular_velocity
-        self.accel_body = t.linear_acceleration
-
-
 class SimSensors:
     """The simulator's side of a rig: the Hokuyo emulator with its ray-caster, the IMU and
     gimbal emulators (and the world's step, unless a backend steps it), as tasks on
@@ -138,7 +126,7 @@ class SimSensors:
         self.lidar_emulator.attach(scheduler)
         self._tasks.append(scheduler.add_task("sim.lidar", rate, self._service_lidar))
         window = shift_window_s if shift_window_s is not None else shift_window(run_length_s)
-        self.imu_emulator = ImuEmulator(self.clock, lambda: ImuTruthAdapter(world), seed=seed,
+        self.imu_emulator = ImuEmulator(self.clock, world.imu_truth, seed=seed,
                                         fault=fault, data_interval_ms=cfg.imu.data_interval_ms,
                                         mount=cfg.imu.mount, shift_window_s=window,
                                         model=imu_model)
