@@ -12,6 +12,7 @@ model made, in the same order, so a seeded run gives the same result to the last
 from __future__ import annotations
 
 import math
+from math import sin
 from typing import Any
 
 from firmware_like.arena import Layout, collector_span, disc_overlap
@@ -188,9 +189,16 @@ class ArenaFloor:
         bx, by = body.x, body.y
         terrain = self.terrain
         if terrain.clear_of_obstacles(bx, by, self._wheels_clear):
-            ground_at = terrain.ground_at
-            fl, fr, rl, rr = [ground_at(bx + f * c - lft * s, by + f * s + lft * c)
-                              for f, lft in self._wheels]
+            # `terrain.ground_at` at each wheel, written out (its sum in its order).
+            waves = terrain._waves
+            z4: list[float] = []
+            for f, lft in self._wheels:
+                wx, wy = bx + f * c - lft * s, by + f * s + lft * c
+                h = 0.0
+                for amp, kx, ky, phase in waves:
+                    h += amp * sin(kx * wx + ky * wy + phase)
+                z4.append(h)
+            fl, fr, rl, rr = z4
             trapped, traction = self._bare_trapped, self._bare_traction
         else:
             radius, half_w = self._radius, self._half_w

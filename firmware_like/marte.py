@@ -73,6 +73,8 @@ _MOUNT: dict[str, float] = {
 
 REGIONS = ("start", "obstacle", "dig")
 
+_tuple_new = tuple.__new__
+
 
 class ImuTruth(NamedTuple):
     """The chassis' true motion, for an IMU emulator (SPEC frame, body axes x forward, y left,
@@ -495,8 +497,11 @@ class MarteWorld:
             raise ValueError(f"dt must be a finite number >= 0, got {dt!r}")
         if dt == 0.0:
             return
-        pieces = max(1, math.ceil(dt / self.params.max_step - 1e-9))
-        h = dt / pieces
+        if dt != self._pieces_dt:  # a run steps by the same dt, tick after tick
+            self._pieces_dt = dt
+            pieces = max(1, math.ceil(dt / self.params.max_step - 1e-9))
+            self._pieces = (pieces, dt / pieces)
+        pieces, h = self._pieces
         for _ in range(pieces):
             self._substep(h)
         self._sample_noise()
@@ -589,7 +594,9 @@ class MarteWorld:
         b1 = cp * r1 - sp * az  # undo pitch
         b3 = sp * r1 + cp * az
         accel = (b1, cr * r2 + sr * b3, -sr * r2 + cr * b3)  # undo roll
-        self._imu = ImuTruth(self.time + dt, self.roll, self.pitch, self.heading, gyro, accel)
+        # ImuTruth(...) without its generated __new__'s Python-level call: the same tuple.
+        self._imu = _tuple_new(ImuTruth, (self.time + dt, self.roll, self.pitch, self.heading,
+                                          gyro, accel))
 
     def _settle(self) -> None:
         """After a teleport: rest on the terrain, take contacts as they are, zero the IMU."""
@@ -649,6 +656,8 @@ class MarteWorld:
 
     _corners_pose: tuple[float, float, float] | None = None
     _corners_at: tuple[tuple[float, float], ...] = ()
+    _pieces_dt = math.nan  # the dt `_pieces` ((how many, how long) of `step`) was worked for
+    _pieces: tuple[int, float] = (1, 0.0)
     _alpha_dt = math.nan  # the piece length `_alpha` (the motors' lag factor) was worked for
     _alpha = 0.0
 
