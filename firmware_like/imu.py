@@ -287,10 +287,14 @@ class ImuEmulator:
             al0 = al1 = al2 = 0.0
         else:
             span = cur.t - prev.t
-            f = min(1.0, max(0.0, (ts - prev.t) / span))
-            roll = prev.roll + f * _wrap(cur.roll - prev.roll)
-            pitch = prev.pitch + f * _wrap(cur.pitch - prev.pitch)
-            yaw = prev.yaw + f * _wrap(cur.yaw - prev.yaw)
+            # min(1.0, max(0.0, x)) as two comparisons (they pick the same value), and
+            # `_wrap` written out.
+            f = (ts - prev.t) / span
+            f = f if f > 0.0 else 0.0
+            f = f if f < 1.0 else 1.0
+            roll = prev.roll + f * ((cur.roll - prev.roll + _PI) % _TWO_PI - _PI)
+            pitch = prev.pitch + f * ((cur.pitch - prev.pitch + _PI) % _TWO_PI - _PI)
+            yaw = prev.yaw + f * ((cur.yaw - prev.yaw + _PI) % _TWO_PI - _PI)
             (p0, p1, p2), (q0, q1, q2) = prev.omega, cur.omega
             w0, w1, w2 = p0 + f * (q0 - p0), p1 + f * (q1 - p1), p2 + f * (q2 - p2)
             (a0, a1, a2), (b0, b1, b2) = prev.accel, cur.accel
@@ -438,8 +442,12 @@ def _cross(a: Vec3, b: Vec3) -> Vec3:
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
+_PI = math.pi
+_TWO_PI = 2.0 * math.pi
+
+
 def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+    return (angle + _PI) % _TWO_PI - _PI
 
 
 def _clip(x: float, limit: float) -> float:
