@@ -120,8 +120,9 @@ class SimSensors:
             true_mount = randomization.lidar_params(true_mount)
             imu_model = randomization.imu_model()
         self.view = LidarView.of(world, true_mount, seed=seed)
-        self._gimbal_times: deque[float] = deque()
-        self._gimbal_angles: deque[tuple[float, float]] = deque()
+        # The last GIMBAL_HISTORY ticks (a full deque drops its oldest as a tick is added).
+        self._gimbal_times: deque[float] = deque(maxlen=GIMBAL_HISTORY)
+        self._gimbal_angles: deque[tuple[float, float]] = deque(maxlen=GIMBAL_HISTORY)
         self.lidar_emulator = HokuyoEmulator(self.clock, self.range_source, port=0)
         self.lidar_emulator.attach(scheduler)
         self._tasks.append(scheduler.add_task("sim.lidar", rate, self._service_lidar))
@@ -199,9 +200,6 @@ class SimSensors:
     def _service_lidar(self, now: float, dt: float) -> None:
         self._gimbal_times.append(now)
         self._gimbal_angles.append(self.gimbal_emulator.angles())
-        if len(self._gimbal_times) > GIMBAL_HISTORY:
-            self._gimbal_times.popleft()
-            self._gimbal_angles.popleft()
         self.lidar_emulator.service(now)
 
 
