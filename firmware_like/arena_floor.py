@@ -12,6 +12,7 @@ model made, in the same order, so a seeded run gives the same result to the last
 from __future__ import annotations
 
 import math
+from math import sin
 from typing import Any
 
 from firmware_like.arena import Layout, collector_span, disc_overlap
@@ -56,6 +57,30 @@ class ArenaFloor:
         self._bare_trapped = arena.crater_trap_sink <= 0.0
         self._bare_traction = 1.0 - (1.0 - arena.crater_slow_min) * max(0.0, 0.0) / (
             arena.crater_trap_sink)
+        # What the last pose gave (the body, then its x, y, heading): the floor is fixed, so
+        # the same pose gives the same answer, and a robot standing still (digging, dumping:
+        # half of a mission's pieces) is not worked out again. `_held` is the body's (x, y)
+        # after `clamp` and `push_off_rocks`, `_contacts` what `contacts` found, `_rest`
+        # the (z, pitch, roll, trapped, traction) `rest` set.
+        self._held_at: tuple[Any, float, float, float] | None = None
+        self._held: tuple[float, float] = (0.0, 0.0)
+        self._contacts_at: tuple[Any, float, float, float] | None = None
+        self._contacts: tuple[set[str], set[str]] = (set(), set())
+        self._rest_at: tuple[Any, float, float, float] | None = None
+        self._rest: tuple[float, float, float, bool, float] = (0.0, 0.0, 0.0, False, 1.0)
+
+    def hold(self, body: Any) -> None:
+        """Walls and rocks stop the robot: `clamp`, then `push_off_rocks` when there are
+        rocks, as the chassis moves (the answer for its last pose remembered)."""
+        at = (body, body.x, body.y, body.heading)
+        if at == self._held_at:
+            body.x, body.y = self._held
+            return
+        self.clamp(body)
+        if self.rocks:
+            self.push_off_rocks(body)
+        self._held_at = at
+        self._held = (body.x, body.y)
 
     def clamp(self, body: Any) -> None:
         """Walls stop the robot: push the footprint back inside, keeping its heading."""
@@ -91,7 +116,11 @@ class ArenaFloor:
             self.clamp(body)
 
     def contacts(self, body: Any) -> tuple[set[str], set[str]]:
-        """(what the footprint collides with, craters it overlaps) now, by SPEC 6.1."""
+        """(what the footprint collides with, craters it overlaps) now, by SPEC 6.1 (the
+        same two sets again while the pose stays: callers only read them)."""
+        at = (body, body.x, body.y, body.heading)
+        if at == self._contacts_at:
+            return self._contacts
         p, a = self.params, self.arena
         eps = a.contact_epsilon
         corners = body.corners()
@@ -123,6 +152,8 @@ class ArenaFloor:
                                            p.robot_width, cx, cy, r)
                 if depth > 0.0:
                     out.add(f"{kind} {i}")
+        self._contacts_at = at
+        self._contacts = (hits, craters)
         return hits, craters
 
     def update_contacts(self, body: Any, count: bool) -> None:
@@ -149,14 +180,25 @@ class ArenaFloor:
         full contact model gives there, for a quarter of the work."""
         if self.flat:
             return
+        at = (body, body.x, body.y, body.heading)
+        if at == self._rest_at:
+            body.z, body.pitch, body.roll, self.trapped, self.traction = self._rest
+            return
         p, a = self.params, self.arena
         c, s = math.cos(body.heading), math.sin(body.heading)
         bx, by = body.x, body.y
         terrain = self.terrain
         if terrain.clear_of_obstacles(bx, by, self._wheels_clear):
-            ground_at = terrain.ground_at
-            fl, fr, rl, rr = [ground_at(bx + f * c - lft * s, by + f * s + lft * c)
-                              for f, lft in self._wheels]
+            # `terrain.ground_at` at each wheel, written out (its sum in its order).
+            waves = terrain._waves
+            z4: list[float] = []
+            for f, lft in self._wheels:
+                wx, wy = bx + f * c - lft * s, by + f * s + lft * c
+                h = 0.0
+                for amp, kx, ky, phase in waves:
+                    h += amp * sin(kx * wx + ky * wy + phase)
+                z4.append(h)
+            fl, fr, rl, rr = z4
             trapped, traction = self._bare_trapped, self._bare_traction
         else:
             radius, half_w = self._radius, self._half_w
@@ -177,3 +219,5 @@ class ArenaFloor:
         body.roll = math.asin(max(-1.0, min(1.0, ((fl + rl) - (fr + rr)) / across)))
         self.trapped = trapped
         self.traction = traction
+        self._rest_at = at
+        self._rest = (body.z, body.pitch, body.roll, trapped, traction)

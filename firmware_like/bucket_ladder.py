@@ -34,7 +34,12 @@ def clipped_gauss(rng: random.Random, sigma: float) -> float:
     """Gaussian noise clipped at 3 sigma; no draw at all for sigma 0 (runs repeat)."""
     if sigma <= 0.0:
         return 0.0
-    return max(-3.0 * sigma, min(3.0 * sigma, rng.gauss(0.0, sigma)))
+    # max(-3 sigma, min(3 sigma, x)) as two comparisons, which pick the same value.
+    hi = 3.0 * sigma
+    x = rng.gauss(0.0, sigma)
+    x = x if x < hi else hi
+    lo = -hi
+    return x if x > lo else lo
 
 
 class BucketLadderExcavator:

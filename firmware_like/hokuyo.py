@@ -256,11 +256,13 @@ class HokuyoSensor:
         return ms & TIMESTAMP_MASK
 
     def _scan_start(self, k: int) -> float:
-        return self._epoch + k * self.period
+        return self._epoch + k * (60.0 / self.model.scan_rpm)  # `period` written out
 
     def _scan_ready(self, k: int) -> float:
-        fraction = (self.model.amax + 1) / self.model.ares
-        return self._scan_start(k) + self.period * fraction
+        # `_scan_start(k) + period * fraction`, written out (`service` asks every tick).
+        m = self.model
+        period = 60.0 / m.scan_rpm
+        return self._epoch + k * period + period * ((m.amax + 1) / m.ares)
 
     @property
     def laser_on(self) -> bool:
@@ -806,8 +808,10 @@ class HokuyoEmulator:
             self.sensor.feed(now, data)
 
     def _write(self, now: float) -> None:
-        out = self.sensor.take_output()
-        client = self._client
+        sensor, client = self.sensor, self._client
+        if not sensor._out and not sensor.hangup and (client is None or not client.out):
+            return  # nothing to send, nothing to close (most ticks)
+        out = sensor.take_output()
         if client is None:
             return
         client.out += out

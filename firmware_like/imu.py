@@ -271,8 +271,10 @@ class ImuEmulator:
 
     def _snapshot(self, now: float) -> _Snap:
         tr = self.truth()
-        return _Snap(now, float(tr.roll), float(tr.pitch), float(tr.yaw),
-                     _vec(tr.omega_body), _vec(tr.accel_body))
+        w, a = tr.omega_body, tr.accel_body  # `_vec` of each, written out
+        return _tuple_new(_Snap, (now, float(tr.roll), float(tr.pitch), float(tr.yaw),
+                                  (float(w[0]), float(w[1]), float(w[2])),
+                                  (float(a[0]), float(a[1]), float(a[2]))))
 
     def _measure(self, ts: float, ms: float, prev: _Snap | None, cur: _Snap) -> SpatialData:
         # The vector helpers below (_lerp, _cross, _mat_t_vec, ...) are written out here, each
@@ -285,10 +287,14 @@ class ImuEmulator:
             al0 = al1 = al2 = 0.0
         else:
             span = cur.t - prev.t
-            f = min(1.0, max(0.0, (ts - prev.t) / span))
-            roll = prev.roll + f * _wrap(cur.roll - prev.roll)
-            pitch = prev.pitch + f * _wrap(cur.pitch - prev.pitch)
-            yaw = prev.yaw + f * _wrap(cur.yaw - prev.yaw)
+            # min(1.0, max(0.0, x)) as two comparisons (they pick the same value), and
+            # `_wrap` written out.
+            f = (ts - prev.t) / span
+            f = f if f > 0.0 else 0.0
+            f = f if f < 1.0 else 1.0
+            roll = prev.roll + f * ((cur.roll - prev.roll + _PI) % _TWO_PI - _PI)
+            pitch = prev.pitch + f * ((cur.pitch - prev.pitch + _PI) % _TWO_PI - _PI)
+            yaw = prev.yaw + f * ((cur.yaw - prev.yaw + _PI) % _TWO_PI - _PI)
             (p0, p1, p2), (q0, q1, q2) = prev.omega, cur.omega
             w0, w1, w2 = p0 + f * (q0 - p0), p1 + f * (q1 - p1), p2 + f * (q2 - p2)
             (a0, a1, a2), (b0, b1, b2) = prev.accel, cur.accel
@@ -307,7 +313,8 @@ class ImuEmulator:
         # The board's axes: mount rotation, turned further by an imu-shift once it happens.
         rot = self.mount_rotation
         rate: Vec3 = (w0, w1, w2)
-        frac = self.shift_fraction(ts)
+        # `shift_fraction` is 0 without a shift to come: no call then.
+        frac = self.shift_fraction(ts) if self._shift_on or self.fault == "imu-shift" else 0.0
         if frac >= 1.0:
             if self._shifted is None:
                 turn = _axis_angle(self.shift_axis, math.radians(self.shift_deg))
@@ -320,7 +327,13 @@ class ImuEmulator:
         (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = rot
         f0, f1, f2 = force
         g0, g1, g2 = rate
-        n = self._draw()
+        # `_draw`, written out
+        at, k = self._noise_at, self.NOISE_PER_SAMPLE
+        if at + k > len(self._noise):
+            self._noise = self._noise_rng.standard_normal(k * 512).tolist()
+            at = 0
+        n = self._noise[at:at + k]
+        self._noise_at = at + k
         if self.fault == "gyro-drift":
             self._advance_drift(n[9:12])
         # force and rate in the board's axes (rot transposed), to g and deg/s, with the
@@ -368,7 +381,7 @@ class ImuEmulator:
                    m01 * h0 + m11 * h1 + m21 * h2 + mnoise * n[7],
                    m02 * h0 + m12 * h1 + m22 * h2 + mnoise * n[8])
         self.samples += 1
-        return SpatialData(ts, ms, accel_g, gyro, mag)
+        return _tuple_new(SpatialData, (ts, ms, accel_g, gyro, mag))
 
     def _advance_drift(self, w: Any) -> None:
         """One step of a first-order Gauss-Markov bias pulled toward `drift_mean_dps`."""
@@ -399,6 +412,11 @@ class ImuEmulator:
         return n
 
 
+#: What a NamedTuple's generated `__new__` calls, without that Python-level call (the same
+#: tuple, built twice per sample).
+_tuple_new = tuple.__new__
+
+
 # -- small vector helpers (plain floats: a few per sample, faster than numpy at this size) ----
 def _vec(v: Any) -> Vec3:
     return (float(v[0]), float(v[1]), float(v[2]))
@@ -424,8 +442,12 @@ def _cross(a: Vec3, b: Vec3) -> Vec3:
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
+_PI = math.pi
+_TWO_PI = 2.0 * math.pi
+
+
 def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+    return (angle + _PI) % _TWO_PI - _PI
 
 
 def _clip(x: float, limit: float) -> float:

@@ -73,6 +73,8 @@ _MOUNT: dict[str, float] = {
 
 REGIONS = ("start", "obstacle", "dig")
 
+_tuple_new = tuple.__new__
+
 
 class ImuTruth(NamedTuple):
     """The chassis' true motion, for an IMU emulator (SPEC frame, body axes x forward, y left,
@@ -91,6 +93,16 @@ class ImuTruth(NamedTuple):
     yaw: float
     angular_velocity: tuple[float, float, float]
     linear_acceleration: tuple[float, float, float]
+
+    # The names the IMU emulator's truth contract reads (`firmware_like.imu`), so the world's
+    # own truth serves it with no adapter.
+    @property
+    def omega_body(self) -> tuple[float, float, float]:
+        return self.angular_velocity
+
+    @property
+    def accel_body(self) -> tuple[float, float, float]:
+        return self.linear_acceleration
 
 
 class ChassisPose(NamedTuple):
@@ -485,8 +497,11 @@ class MarteWorld:
             raise ValueError(f"dt must be a finite number >= 0, got {dt!r}")
         if dt == 0.0:
             return
-        pieces = max(1, math.ceil(dt / self.params.max_step - 1e-9))
-        h = dt / pieces
+        if dt != self._pieces_dt:  # a run steps by the same dt, tick after tick
+            self._pieces_dt = dt
+            pieces = max(1, math.ceil(dt / self.params.max_step - 1e-9))
+            self._pieces = (pieces, dt / pieces)
+        pieces, h = self._pieces
         for _ in range(pieces):
             self._substep(h)
         self._sample_noise()
@@ -534,9 +549,7 @@ class MarteWorld:
         self.x += v * math.cos(mid) * dt
         self.y += v * math.sin(mid) * dt
         self.heading = math.remainder(self.heading + yaw_rate * dt, 2.0 * math.pi)
-        self._clamp_to_arena()
-        if self.floor.rocks:
-            self._push_off_rocks()
+        self.floor.hold(self)  # `_clamp_to_arena`, then `_push_off_rocks` among rocks
         self._update_contacts(count=True)
         self._update_attitude()
         self._update_imu(dt, x0, y0, z0, yaw0, roll0, pitch0)
@@ -581,7 +594,9 @@ class MarteWorld:
         b1 = cp * r1 - sp * az  # undo pitch
         b3 = sp * r1 + cp * az
         accel = (b1, cr * r2 + sr * b3, -sr * r2 + cr * b3)  # undo roll
-        self._imu = ImuTruth(self.time + dt, self.roll, self.pitch, self.heading, gyro, accel)
+        # ImuTruth(...) without its generated __new__'s Python-level call: the same tuple.
+        self._imu = _tuple_new(ImuTruth, (self.time + dt, self.roll, self.pitch, self.heading,
+                                          gyro, accel))
 
     def _settle(self) -> None:
         """After a teleport: rest on the terrain, take contacts as they are, zero the IMU."""
@@ -641,6 +656,8 @@ class MarteWorld:
 
     _corners_pose: tuple[float, float, float] | None = None
     _corners_at: tuple[tuple[float, float], ...] = ()
+    _pieces_dt = math.nan  # the dt `_pieces` ((how many, how long) of `step`) was worked for
+    _pieces: tuple[int, float] = (1, 0.0)
     _alpha_dt = math.nan  # the piece length `_alpha` (the motors' lag factor) was worked for
     _alpha = 0.0
 

@@ -186,7 +186,7 @@ class SabertoothEmulator:
     # -- time ---------------------------------------------------------------------------------
     def tick(self, now: float) -> None:
         """Advance to `now`: deliver paced bytes whose wire time is over, run timeouts."""
-        if self.paced:
+        if self.paced and self._wire:
             self._drain_wire(now)
         self._expire(now)
 

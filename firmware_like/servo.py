@@ -135,6 +135,12 @@ class ServoEmulator:
         if h <= 0.0:
             return
         self._t = now
+        x = self._x
+        if x == self.angle_deg and self._v == 0.0 and (x == self.target_deg or not self.engaged):
+            # At rest, the horn on the pulse: `_ramp` would not move and the horn would take
+            # the pulse's value (the usual case between two of the leveller's moves).
+            self.angle_deg = x
+            return
         if self.engaged and self.target_deg is not None:
             was_there = self._x == self.target_deg and self._v == 0.0
             self._ramp(h)

@@ -89,18 +89,6 @@ def shift_window(run_length_s: float) -> tuple[float, float]:
     return (0.1 * run_length_s, 0.9 * run_length_s)
 
 
-class ImuTruthAdapter:
-    """The world's `ImuTruth` under the names the IMU emulator reads."""
-
-    __slots__ = ("roll", "pitch", "yaw", "omega_body", "accel_body")
-
-    def __init__(self, world: MarteWorld) -> None:
-        t = world.imu_truth()
-        self.roll, self.pitch, self.yaw = t.roll, t.pitch, t.yaw
-        self.omega_body = t.angular_velocity
-        self.accel_body = t.linear_acceleration
-
-
 class SimSensors:
     """The simulator's side of a rig: the Hokuyo emulator with its ray-caster, the IMU and
     gimbal emulators (and the world's step, unless a backend steps it), as tasks on
@@ -132,13 +120,14 @@ class SimSensors:
             true_mount = randomization.lidar_params(true_mount)
             imu_model = randomization.imu_model()
         self.view = LidarView.of(world, true_mount, seed=seed)
-        self._gimbal_times: deque[float] = deque()
-        self._gimbal_angles: deque[tuple[float, float]] = deque()
+        # The last GIMBAL_HISTORY ticks (a full deque drops its oldest as a tick is added).
+        self._gimbal_times: deque[float] = deque(maxlen=GIMBAL_HISTORY)
+        self._gimbal_angles: deque[tuple[float, float]] = deque(maxlen=GIMBAL_HISTORY)
         self.lidar_emulator = HokuyoEmulator(self.clock, self.range_source, port=0)
         self.lidar_emulator.attach(scheduler)
         self._tasks.append(scheduler.add_task("sim.lidar", rate, self._service_lidar))
         window = shift_window_s if shift_window_s is not None else shift_window(run_length_s)
-        self.imu_emulator = ImuEmulator(self.clock, lambda: ImuTruthAdapter(world), seed=seed,
+        self.imu_emulator = ImuEmulator(self.clock, world.imu_truth, seed=seed,
                                         fault=fault, data_interval_ms=cfg.imu.data_interval_ms,
                                         mount=cfg.imu.mount, shift_window_s=window,
                                         model=imu_model)
@@ -211,9 +200,6 @@ class SimSensors:
     def _service_lidar(self, now: float, dt: float) -> None:
         self._gimbal_times.append(now)
         self._gimbal_angles.append(self.gimbal_emulator.angles())
-        if len(self._gimbal_times) > GIMBAL_HISTORY:
-            self._gimbal_times.popleft()
-            self._gimbal_angles.popleft()
         self.lidar_emulator.service(now)
 
 
