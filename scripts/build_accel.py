@@ -34,6 +34,19 @@ MODULES = [
     "ramp/autonomy/perception/gimbal.py",
     "ramp/autonomy/odometry.py",
     "ramp/autonomy/mount.py",
+    "firmware_like/sabertooth.py",
+    "firmware_like/hokuyo.py",
+    "firmware_like/pty_link.py",
+    "firmware_like/bucket_ladder.py",
+    "firmware_like/world.py",
+    "ramp/simulation/backplane.py",
+    "ramp/hal/sabertooth.py",
+    "ramp/hal/sabertooth_codec.py",
+    "ramp/runtime/buses.py",
+    "ramp/layers/robot_distribution/interlocks.py",
+    "ramp/common/tcpclient.py",
+    "ramp/mcp/protocol.py",
+    "ramp/autonomy/perception/scans.py",
 ]
 
 
