@@ -23,6 +23,7 @@ from typing import Any
 
 from bench.common import Settings, compare, progress
 from firmware_like.marte import MarteWorld
+from ramp.common import accel
 from ramp.simulation.campaign import combination
 from ramp.simulation.mission import MissionOptions, MissionRun
 
@@ -113,6 +114,7 @@ def run(settings: Settings, workdir: Path) -> dict[str, Any]:
         "cpu_s_per_simulated_minute": compare(round(cpu / sim * 60.0, 3),
                                               round(base["cpu_s_per_sim_min"], 3)),
         "wall_s": round(wall, 2),
+        "compiled_hot_path": accel.status().active or accel.status().reason,
         "ten_minutes_wall_s": round(600.0 / rtf, 1),
         "wall_pct_by_part": parts,
         "outcome": summary["outcome"], "final_state": summary["final_state"],

@@ -254,7 +254,8 @@ def describe(s: dict[str, Any]) -> list[str]:
            f"  localization  {s['localization_losses']} loss(es), {s['faults']} fault(s) "
            "recovered or not",
            f"  time          {s['sim_time_s']:.1f} s simulated in {s['wall_time_s']:.1f} s "
-           f"({s['rtf'] or 0:.0f}x real time)",
+           f"({s['rtf'] or 0:.0f}x real time, "
+           f"{'compiled hot path' if s.get('compiled') else 'plain Python'})",
            "  " + ("QUALIFIED: >= 10 kg, no collision, no crater entry" if s["qualified"]
                    else "not qualified (needs >= 10 kg, no collision, no crater entry)")]
     if s.get("last_problem"):

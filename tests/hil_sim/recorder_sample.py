@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from firmware_like.marte import MOTORS
 from ramp.recorder import Recorder, RecorderConfig
 from ramp.recorder.writer import recording_files
 from tests.harness import REPO, SimHarness, ask_line
@@ -139,15 +140,19 @@ def record_sample(directory: Path, duration: float = DURATION) -> tuple[Path, di
                    session={"config": "ramp.yaml", "mode": "simulated (virtual clock)"})
     h = SimHarness(recorder=rec)  # the robot where `ramp run --sim` puts it: the start box
     received: dict[str, list[float]] = {}
-    world_set = h.world.set_motor
+    world = h.world
 
-    def emulator_received(name: str, duty: float) -> None:
-        world_set(name, duty)
-        seen = received.setdefault(name, [])
-        if not seen or seen[-1] != duty:
-            seen.append(duty)
+    def emulator_received(now: float, dt: float) -> None:
+        # What the emulators applied, read from the world after every tick (its class may be
+        # compiled, so its `set_motor` cannot be wrapped on the instance).
+        for name in MOTORS:
+            duty = world.duty(name)
+            seen = received.setdefault(name, [])
+            if not seen or seen[-1] != duty:
+                seen.append(duty)
 
-    h.world.set_motor = emulator_received  # type: ignore[method-assign]
+    h.sup.scheduler.add_task("test.emulator_received", h.sup.scheduler.rate_hz,
+                             emulator_received)
     try:
         sent = run(h, duration)
     finally:

@@ -496,6 +496,18 @@ def test_the_server_engages_a_servo_only_for_a_real_true(
     assert b.gimbal_emu.pan.engaged and b.sim_end.connected
 
 
+class _With:
+    """An emulator with some attributes replaced (its class may be compiled, and a compiled
+    class's methods cannot be replaced on the instance)."""
+
+    def __init__(self, emulator: Any, **replaced: Any) -> None:
+        self._emulator = emulator
+        self.__dict__.update(replaced)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._emulator, name)
+
+
 def test_a_sample_that_cannot_be_sent_loses_only_itself(
         bench: Bench, monkeypatch: pytest.MonkeyPatch,
         caplog: pytest.LogCaptureFixture) -> None:
@@ -517,8 +529,9 @@ def test_a_sample_that_cannot_be_sent_loses_only_itself(
             samples[0] = samples[0]._replace(t=float("nan"))
         return samples
 
-    monkeypatch.setattr(b.emu, "poll", poisoned_poll)
-    monkeypatch.setattr(b.gimbal_emu.tilt, "take_reached", lambda: [float("inf"), *take()])
+    monkeypatch.setattr(b.server, "imu", _With(b.emu, poll=poisoned_poll))
+    tilt = _With(b.gimbal_emu.tilt, take_reached=lambda: [float("inf"), *take()])
+    monkeypatch.setattr(b.server, "gimbal", _With(b.gimbal_emu, tilt=tilt))
     b.gimbal.point(30.0, 0.0)
     b.run(1.0)
     assert b.sim_end.connected and b.gimbal.reached and b.gimbal.angles() == (30.0, 0.0)

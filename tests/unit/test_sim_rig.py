@@ -43,13 +43,24 @@ def arena_points(records: list[ScanRecord], world: MarteWorld) -> np.ndarray:
                            for r in records])
 
 
+class _HornsAt:
+    """A gimbal whose horns stand where the test puts them (the emulator's own class may be
+    compiled, so its methods cannot be replaced on the instance)."""
+
+    def __init__(self, pan: float, tilt: float) -> None:
+        self.pan, self.tilt = pan, tilt
+
+    def angles(self) -> tuple[float, float]:
+        return (self.pan, self.tilt)
+
+
 def test_the_simulators_lidar_and_autonomy_yaml_agree_on_where_the_scanner_is() -> None:
     world = MarteWorld.seeded(1)
     world.place(2.0, 1.0, 35.0)
     view = LidarView.of(world)  # firmware_like's own mount, as `ramp sim lidar` uses it
     with Rig(world, load_autonomy_config()) as rig:
         for pan, tilt in ((0.0, 0.0), (30.0, 10.0), (-60.0, 40.0), (90.0, -20.0)):
-            rig.gimbal_emulator.angles = lambda p=pan, t=tilt: (p, t)  # type: ignore[method-assign]
+            rig.sensors.gimbal_emulator = _HornsAt(pan, tilt)  # type: ignore[assignment]
             ours = rig.true_lidar_pose()
             theirs = view.pose_of_world(math.radians(pan), math.radians(tilt))
             assert ours.origin == pytest.approx(theirs.origin, abs=1e-9)
@@ -62,7 +73,7 @@ def test_a_config_with_another_mount_moves_the_simulated_scanner_with_it() -> No
     cfg = replace(cfg, lidar=replace(cfg.lidar, mount=Mount(0.5, 0.1, 0.6)),
                   gimbal=replace(cfg.gimbal, pivot=(0.5, 0.1, 0.5)))
     with Rig(world, cfg) as rig:
-        rig.gimbal_emulator.angles = lambda: (0.0, 90.0)  # type: ignore[method-assign]
+        rig.sensors.gimbal_emulator = _HornsAt(0.0, 90.0)  # type: ignore[assignment]
         pose = rig.true_lidar_pose()  # tilted straight down about a pivot 10 cm below
         c = world.chassis_pose()
         expected = (c.x + 0.5 * math.cos(c.yaw) + 0.1 * -math.sin(c.yaw) + 0.1 * math.cos(c.yaw),
