@@ -14,7 +14,6 @@ import pytest
 
 from ramp.clock import VirtualClock
 from ramp.common import accel
-from ramp.simulation.rig import ImuTruthAdapter
 
 
 def _build(tmp_path: Path, source_text: str = "x = 1\n", **overrides: object) -> Path:
@@ -101,8 +100,7 @@ def test_the_compiled_world_and_imu_give_the_sources_results_bit_for_bit() -> No
                        (_source_copy("firmware_like.marte"), _source_copy("firmware_like.imu"))):
         world = marte.MarteWorld(seed=3)
         clock = VirtualClock()
-        emulator = imu.ImuEmulator(clock, lambda w=world: ImuTruthAdapter(w), seed=3,
-                                   fault="gyro-drift")
+        emulator = imu.ImuEmulator(clock, world.imu_truth, seed=3, fault="gyro-drift")
         samples = []
         for i in range(600):  # 6 s: away, a turn on the spot, back
             duty = 0.6 if i < 200 else (0.0 if i < 400 else -0.5)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from ramp.autonomy import arena
@@ -64,8 +64,7 @@ class Kit:
         return self.robot.clock.now()
 
     def follower_config(self, **changes: float) -> FollowerConfig:
-        base = FollowerConfig(max_speed_pct=self.settings.drive_speed_pct)
-        return FollowerConfig(**{**base.__dict__, **changes})
+        return replace(FollowerConfig(max_speed_pct=self.settings.drive_speed_pct), **changes)
 
     def pose(self) -> Pose | None:
         return self.tracker.estimate()
