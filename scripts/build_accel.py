@@ -23,7 +23,18 @@ WORK = ROOT / "build" / "accel-work"
 GROUP = "ramp_accel"
 EXTENSION_SUFFIXES = tuple(_SUFFIXES)
 
-#: The compiled modules, by path from the repository root.
+#: The compiled modules, by path from the repository root. Left out, and why (a compiled class
+#: is fixed: its methods cannot be replaced on an instance nor its base be an interpreted
+#: class): the plugin API's base classes (ramp/hal/interfaces.py, ramp/autonomy/hal/
+#: interfaces.py: a team's driver subclasses them in Python) and the drivers built on them in
+#: Python (ramp/autonomy/hal/sim.py, simlink.py); the Hokuyo driver and the MCP link (their
+#: abstract bases fail at construction); ramp/mcp/session.py (generic classes);
+#: ramp/simulation/rig.py (finds files by `__file__`); RobotDistribution (tests replace its
+#: `request`); ramp/hal/simio.py (its inputs redefine `value` with other types); the codecs
+#: and parsers that check their arguments themselves (ramp/hal/sabertooth_codec.py,
+#: ramp/autonomy/hal/scip.py, ramp/mcp/protocol.py: compiled, a bool or a memoryview is
+#: converted or refused by the annotation before their own check) and the pose tracker
+#: (tests hand it duck-typed gyros).
 MODULES = [
     "ramp/scheduler.py",
     "firmware_like/imu.py",
@@ -41,12 +52,16 @@ MODULES = [
     "firmware_like/world.py",
     "ramp/simulation/backplane.py",
     "ramp/hal/sabertooth.py",
-    "ramp/hal/sabertooth_codec.py",
     "ramp/runtime/buses.py",
     "ramp/layers/robot_distribution/interlocks.py",
     "ramp/common/tcpclient.py",
-    "ramp/mcp/protocol.py",
     "ramp/autonomy/perception/scans.py",
+    "ramp/autonomy/executive/drive.py",
+    "ramp/autonomy/executive/robot.py",
+    "ramp/autonomy/planning/follower.py",
+    "ramp/autonomy/planning/geometry.py",
+    "ramp/layers/server/tcp.py",
+    "ramp/layers/functional/base_drive.py",
 ]
 
 
