@@ -79,6 +79,8 @@ def main() -> int:
     os.chdir(ROOT)  # mypyc names the modules by their paths from here
     shutil.rmtree(OUT, ignore_errors=True)
     shutil.rmtree(WORK, ignore_errors=True)
+    # Hashed before compiling: a source edited during the build no longer matches the manifest.
+    sources = {p: hashlib.sha256((ROOT / p).read_bytes()).hexdigest() for p in MODULES}
     extensions = mypycify(MODULES, opt_level="3", group_name=GROUP, multi_file=True,
                           target_dir=str(WORK / "c"))
     setup(name="ramp-accel", ext_modules=extensions, script_name="build_accel.py",
@@ -95,8 +97,7 @@ def main() -> int:
 
     manifest = {
         "cache_tag": sys.implementation.cache_tag,
-        "modules": {module_name(p): {"source": p,
-                                     "sha256": hashlib.sha256((ROOT / p).read_bytes()).hexdigest(),
+        "modules": {module_name(p): {"source": p, "sha256": sources[p],
                                      "extension": extension_of(module_name(p))}
                     for p in MODULES},
         "runtime": {f"{GROUP}__mypyc": extension_of(f"{GROUP}__mypyc")},

@@ -62,20 +62,24 @@ def check(build_dir: Path = BUILD_DIR, root: Path = ROOT) -> tuple[dict[str, Pat
         return {}, f"not built ({build_dir / MANIFEST} is missing; run make)"
     except (OSError, ValueError) as exc:
         return {}, f"unreadable manifest {build_dir / MANIFEST}: {exc}"
-    if manifest.get("cache_tag") != sys.implementation.cache_tag:
-        return {}, f"built for {manifest.get('cache_tag')}, this is {sys.implementation.cache_tag}"
-    files: dict[str, Path] = {}
-    for name, entry in manifest.get("modules", {}).items():
-        source = root / entry["source"]
-        try:
-            same = _sha256(source) == entry["sha256"]
-        except OSError:
-            same = False
-        if not same:
-            return {}, f"{entry['source']} changed since the build (run make)"
-        files[name] = build_dir / entry["extension"]
-    for name, ext in manifest.get("runtime", {}).items():
-        files[name] = build_dir / ext
+    try:
+        if manifest.get("cache_tag") != sys.implementation.cache_tag:
+            return {}, (f"built for {manifest.get('cache_tag')}, "
+                        f"this is {sys.implementation.cache_tag}")
+        files: dict[str, Path] = {}
+        for name, entry in manifest.get("modules", {}).items():
+            source = root / entry["source"]
+            try:
+                same = _sha256(source) == entry["sha256"]
+            except OSError:
+                same = False
+            if not same:
+                return {}, f"{entry['source']} changed since the build (run make)"
+            files[name] = build_dir / entry["extension"]
+        for name, ext in manifest.get("runtime", {}).items():
+            files[name] = build_dir / ext
+    except (AttributeError, KeyError, TypeError) as exc:  # valid JSON, not a manifest
+        return {}, f"unreadable manifest {build_dir / MANIFEST}: no {exc} where expected"
     missing = [str(path) for path in files.values() if not path.is_file()]
     if missing:
         return {}, f"the build is incomplete: {missing[0]} is missing (run make)"

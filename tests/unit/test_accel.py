@@ -62,6 +62,14 @@ def test_no_build_a_build_for_another_python_and_a_partial_build_are_not_used(
     assert "incomplete" in accel.check(tmp_path / "again" / "build", root)[1]
 
 
+def test_a_manifest_that_is_not_one_is_reported_not_raised(tmp_path: Path) -> None:
+    no_source = {"cache_tag": sys.implementation.cache_tag, "modules": {"pkg.hot": {}}}
+    for manifest in ([], no_source):
+        (tmp_path / accel.MANIFEST).write_text(json.dumps(manifest))
+        files, why = accel.check(tmp_path, tmp_path)
+        assert files == {} and why.startswith("unreadable manifest")
+
+
 def test_ramp_accel_0_turns_it_off(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("RAMP_ACCEL", "0")
     monkeypatch.setattr(sys, "meta_path", [f for f in sys.meta_path
