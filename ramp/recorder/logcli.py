@@ -14,6 +14,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from ramp.common.outputs import output_file
+
 
 def add_log_parser(sub: Any) -> argparse.ArgumentParser:
     """Register `log summary` and `log plot` on an argparse subparsers object."""
@@ -28,12 +30,17 @@ def add_log_parser(sub: Any) -> argparse.ArgumentParser:
     summary.set_defaults(func=cmd_summary)
     plot = cmds.add_parser("plot", help="draw a recorded run's time series")
     plot.add_argument("files", nargs="+", type=Path, metavar="FILE.mcap")
-    plot.add_argument("-o", "--out", type=Path, required=True, metavar="FILE.png",
+    plot.add_argument("-o", "--out", type=_output_path, required=True, metavar="FILE.png",
                       help="the picture to write (PNG; .svg and .pdf work too)")
     plot.add_argument("--title", default=None, help="title (default: the file names)")
     _progress_flags(plot)
     plot.set_defaults(func=cmd_plot)
     return log
+
+
+def _output_path(text: str) -> Path:
+    """`-o FILE.png`, checked before the recordings are read."""
+    return Path(output_file(text))
 
 
 def _progress_flags(p: argparse.ArgumentParser) -> None:

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ramp.common.outputs import save_figure
 from ramp.recorder.reading import Msg
 from ramp.recorder.schemas import (
     TOPIC_COMMANDS,
@@ -198,7 +199,6 @@ def plot(data: PlotData, out: Path, title: str = "") -> Path:
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout(rect=(0, 0.03 if marks else 0, 1, 1))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
+    save_figure(fig, out, dpi=110)
     plt.close(fig)
     return out

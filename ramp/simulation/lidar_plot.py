@@ -18,6 +18,7 @@ import numpy as np
 
 from firmware_like.arena import collector_span, footprint_corners
 from firmware_like.arena_params import HIT_NAMES, HIT_NONE
+from ramp.common.outputs import save_figure
 
 if TYPE_CHECKING:
     from firmware_like.lidar_view import Scan
@@ -130,6 +131,6 @@ def draw_scan(world: MarteWorld, scan: Scan, angles: np.ndarray, path: str | Pat
     ax_z.set_xlabel("beam angle (deg)")
     ax_z.grid(alpha=0.3)
     ax_z.set_xlim(-136, 136)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 

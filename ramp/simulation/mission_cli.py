@@ -17,6 +17,7 @@ when the run did not qualify, 2 on a usage, world-file or config error.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import logging
 import os
@@ -24,6 +25,8 @@ import signal
 import sys
 from pathlib import Path
 from typing import Any
+
+from ramp.common.outputs import output_file
 
 HEADINGS = (0, 90, 180, 270)
 REALTIME_PORT = 5577  # `ramp run`'s port: what ramp-shell and ramp-teleop try first
@@ -60,13 +63,13 @@ def add_mission_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser])
                    help="the autonomy's config (default: the repository's autonomy.yaml)")
     p.add_argument("--json", action="store_true",
                    help="end with one JSON object (the summary) as the last line")
-    p.add_argument("--trace", metavar="FILE",
+    p.add_argument("--trace", type=output_file, metavar="FILE",
                    help="write the ground truth as JSON lines: a header with the true world, "
                         "then t, x, y, yaw, lift, bin_kg, delivered_kg, state every 0.1 s")
-    p.add_argument("--plot", metavar="FILE.png",
+    p.add_argument("--plot", type=output_file, metavar="FILE.png",
                    help="draw the arena, true and detected obstacles, planned and driven "
                         "paths")
-    p.add_argument("--record", metavar="FILE.mcap",
+    p.add_argument("--record", type=output_file, metavar="FILE.mcap",
                    help="record the autonomy's view (mission state, true and estimated "
                         "pose) into an MCAP file")
     p.add_argument("--foxglove-port", type=int, default=None, metavar="P",
@@ -101,6 +104,7 @@ def cmd_mission(args: argparse.Namespace) -> int:
 
 def _mission(args: argparse.Namespace) -> int:
     from firmware_like.world_file import WorldFileError
+    from ramp.common.files import why
     from ramp.errors import ConfigErrors
     from ramp.simulation.arena_process import ArenaError
     from ramp.simulation.arguments import ArgumentError, check_duration, check_seed
@@ -130,11 +134,13 @@ def _mission(args: argparse.Namespace) -> int:
                              single_loop=args.single_loop,
                              port=(REALTIME_PORT if args.port is None else args.port)
                              if args.realtime else 0)
+    if args.plot and importlib.util.find_spec("matplotlib") is None:
+        raise UsageError("--plot needs matplotlib: pip install 'ramp[plot]'")
     logging.basicConfig(level=logging.ERROR, format="%(levelname)s %(name)s: %(message)s")
     try:
         trace = open(args.trace, "w", encoding="utf-8") if args.trace else None  # noqa: SIM115
     except OSError as exc:
-        raise UsageError(f"--trace: cannot write {args.trace}: {exc.strerror or exc}") from exc
+        raise UsageError(f"--trace: cannot write {args.trace}: {why(exc)}") from exc
     try:
         try:
             run = MissionRun(options, trace_file=trace)
@@ -177,20 +183,24 @@ def _mission(args: argparse.Namespace) -> int:
     if args.trace:
         summary["trace"] = args.trace
         summary["referee"] = _referee(args.trace)
+    code = 0 if summary["qualified"] else 1
     if args.plot:
+        from ramp.simulation.mission_plot import draw_mission
+
         try:
-            from ramp.simulation.mission_plot import draw_mission
-        except ImportError as exc:
-            raise UsageError("--plot needs matplotlib: pip install 'ramp[plot]'") from exc
-        draw_mission(run, args.plot)
-        summary["plot"] = args.plot
+            draw_mission(run, args.plot)
+            summary["plot"] = args.plot
+        except OSError as exc:  # the disk filled up during the run, say
+            print(f"ramp sim mission: --plot: cannot write {args.plot}: {why(exc)}",
+                  file=sys.stderr)
+            code = 1
     if args.record:
         summary["record"] = args.record
     for line in describe(summary):
         print(line)
     if args.json:
         print(json.dumps(summary))
-    return 0 if summary["qualified"] else 1
+    return code
 
 
 def _watch(run: Any, args: argparse.Namespace) -> None:

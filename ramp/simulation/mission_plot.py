@@ -14,6 +14,8 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
+from ramp.common.outputs import save_figure
+
 if TYPE_CHECKING:
     from ramp.simulation.mission import MissionRun
 
@@ -53,7 +55,7 @@ def draw_mission(run: MissionRun, path: str) -> None:
                  f"{s['delivered_kg']:.1f} kg delivered, {s['collisions']} collisions, "
                  f"{s['crater_entries']} crater entries", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from firmware_like.arena import collector_span, footprint_corners
+from ramp.common.outputs import save_figure
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -46,7 +47,7 @@ def draw_perception(world: MarteWorld, result: PerceiveResult, path: str | Path,
     _obstacles(ax_map, world, result)
     if title:
         fig.suptitle(title, fontsize=11)
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
 
 

@@ -55,6 +55,7 @@ from ramp.autonomy.hal.lidar import (
 from ramp.clock import Clock, MonotonicClock
 from ramp.common import tcpclient
 from ramp.common.hostport import parse_hostport
+from ramp.common.outputs import output_file, save_figure
 from ramp.common.tcpclient import IoLoop, TcpClient, check_seconds
 from ramp.scheduler import Scheduler
 
@@ -514,7 +515,7 @@ def plot_scan(scan: Scan, path: str, title: str = "") -> None:
     ax.set_title(title or f"scan {scan.seq}: {len(scan.ranges)} steps, "
                  f"sensor time {scan.sensor_time:.3f} s", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path)
     plt.close(fig)
 
 
@@ -531,7 +532,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="also stream N scans (MD) and report their rate")
     parser.add_argument("--model", default="UTM-30LX",
                         help="model PP must report (prefix; '' accepts any)")
-    parser.add_argument("--plot", metavar="FILE.png",
+    parser.add_argument("--plot", type=output_file, metavar="FILE.png",
                         help="draw the scan seen from above (needs matplotlib: ramp[plot])")
     args = parser.parse_args(argv)
     if args.plot:
