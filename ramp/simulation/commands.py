@@ -32,7 +32,7 @@ from collections.abc import Callable
 from typing import Any
 
 from ramp.common.outputs import output_file
-from ramp.simulation.arguments import ArgumentError, check_seed, check_yaw
+from ramp.simulation.arguments import MAX_YAW_DEG, ArgumentError, check_seed, check_yaw
 
 
 class UsageError(Exception):
@@ -172,8 +172,10 @@ def _lidar(args: argparse.Namespace) -> int:
     x, y, yaw = parse_pose(args.at)
     checked(check_seed, args.seed)
     for name in ("tilt", "pan"):
-        if not math.isfinite(getattr(args, name)):
-            raise UsageError(f"--{name}: expected an angle in degrees")
+        deg = getattr(args, name)
+        if not (math.isfinite(deg) and -MAX_YAW_DEG <= deg <= MAX_YAW_DEG):
+            raise UsageError(f"--{name}: expected an angle in degrees, -{MAX_YAW_DEG:g} to "
+                             f"{MAX_YAW_DEG:g}, got {deg:g}")
     if args.world:
         try:
             layout = load_world(args.world)

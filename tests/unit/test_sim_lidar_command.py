@@ -84,3 +84,14 @@ def test_via_scip_the_driver_reads_the_very_same_scan_over_tcp(
     via = json.loads(capsys.readouterr().out.splitlines()[-1])
     assert via["via_scip"] is True and direct["via_scip"] is False
     assert via["ranges_mm"] == direct["ranges_mm"] and via["hits"] == direct["hits"]
+
+
+@pytest.mark.parametrize("option, value", [("--tilt", "1e308"), ("--pan", "-1e308"),
+                                           ("--tilt", "nan"), ("--pan", "inf"),
+                                           ("--tilt", "361")])
+def test_an_angle_out_of_range_is_a_usage_error(capsys: pytest.CaptureFixture[str],
+                                                option: str, value: str) -> None:
+    assert main(["sim", "lidar", "--at", "1.2,1.94,0", f"{option}={value}"]) == 2
+    err = capsys.readouterr().err
+    assert f"{option}: expected an angle in degrees, -360 to 360" in err
+    assert "Traceback" not in err
