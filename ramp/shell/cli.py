@@ -44,6 +44,7 @@ from ramp.shell.render import (
 #: Seconds a request may take before the shell gives up on the line (and on the connection:
 #: a late answer would pair with the next request).
 DEFAULT_TIMEOUT = 2.0
+MAX_TIMEOUT_S = 3600.0  # an hour: beyond it (1e308) the socket layer overflows
 #: At most this often does the shell ask `robot.modules` after a typed line.
 MODULE_CHECK_PERIOD = 1.0
 MAX_WATCH_HZ = 50.0
@@ -649,8 +650,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         host, port = parse_address(args.address)
     except ValueError as exc:
         parser.error(str(exc))
-    if not math.isfinite(args.timeout) or args.timeout <= 0:
-        parser.error("--timeout must be a positive number of seconds")
+    if not (math.isfinite(args.timeout) and 0 < args.timeout <= MAX_TIMEOUT_S):
+        parser.error(f"--timeout must be a positive number of seconds up to {MAX_TIMEOUT_S:g}, "
+                     f"got {args.timeout:g}")
     color = (sys.stdout.isatty() and not args.no_color
              and not os.environ.get("NO_COLOR") and os.environ.get("TERM") != "dumb")
     shell = Shell(host, port, sys.stdout, color=color, timeout=args.timeout, raw=args.raw)

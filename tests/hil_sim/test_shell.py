@@ -248,6 +248,14 @@ def test_c_closed_port_exits_2() -> None:
     assert f"cannot connect to 127.0.0.1:{port}" in proc.stderr
 
 
+@pytest.mark.parametrize("timeout", ["1e308", "nan", "0"])
+def test_c_a_timeout_out_of_range_is_a_usage_error(timeout: str) -> None:
+    proc = run_c("127.0.0.1:1", "--timeout", timeout, "-c", "base:base.get=()")
+    assert proc.returncode == 2  # 1e308 ended in an OverflowError traceback
+    assert "--timeout must be a positive number of seconds up to 3600" in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
 def test_c_connection_closed_by_peer_exits_2() -> None:
     listener = socket.create_server(("127.0.0.1", 0))
     port = listener.getsockname()[1]

@@ -676,3 +676,16 @@ def test_the_check_command_fails_clearly_when_nothing_answers(
         assert main([f"127.0.0.1:{port}", "--timeout", "0.3"]) == 1
     err = capsys.readouterr().err
     assert f"no answer from 127.0.0.1:{port} within 0.3 s" in err and "ECONNREFUSED" in err
+
+
+@pytest.mark.parametrize("args, says", [
+    (["--timeout", "nan"], "--timeout: expected seconds"),  # waited for ever
+    (["--timeout", "1e308"], "--timeout: expected seconds"),
+    (["--stream", "-5"], "--stream: expected 0-1000000 scans"),
+])
+def test_the_check_command_bounds_its_numbers(capsys: pytest.CaptureFixture[str],
+                                              args: list[str], says: str) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(["127.0.0.1:1", *args])
+    assert info.value.code == 2
+    assert says in capsys.readouterr().err

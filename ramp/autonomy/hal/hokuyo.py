@@ -535,6 +535,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--plot", type=output_file, metavar="FILE.png",
                         help="draw the scan seen from above (needs matplotlib: ramp[plot])")
     args = parser.parse_args(argv)
+    if not (math.isfinite(args.timeout) and 0 < args.timeout <= 3600):
+        parser.error(f"--timeout: expected seconds, more than 0 and up to 3600, "
+                     f"got {args.timeout:g}")
+    if not 0 <= args.stream <= 1_000_000:
+        parser.error(f"--stream: expected 0-1000000 scans, got {args.stream}")
     if args.plot:
         try:
             import matplotlib  # noqa: F401 - checked before connecting, not after
