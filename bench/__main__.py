@@ -26,6 +26,7 @@ from typing import Any
 
 from bench import SECTIONS
 from bench.common import PROFILES, kill_all, machine_info, progress
+from ramp.common.outputs import output_file
 
 
 def _on_signal(signum: int, frame: FrameType | None) -> None:
@@ -53,7 +54,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                       help="minimal settings: proves the code runs (used by the test suite)")
     parser.add_argument("--only", type=parse_only, default=None, metavar="NAME[,NAME]",
                         help=f"run only these: {', '.join(SECTIONS)}")
-    parser.add_argument("--out", type=Path, help="also write the JSON document to this file")
+    parser.add_argument("--out", type=lambda text: Path(output_file(text)),
+                        help="also write the JSON document to this file (checked first)")
     args = parser.parse_args(argv)
     settings = PROFILES["smoke" if args.smoke else "quick" if args.quick else "full"]
     names = args.only or list(SECTIONS)

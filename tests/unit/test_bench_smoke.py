@@ -179,3 +179,12 @@ def test_a_realtime_run_without_a_summary_names_its_mode(lines: list[str], what:
     with pytest.raises(ValueError, match=what):
         summary_of("apart", lines)
     assert summary_of("apart", ['{"outcome": "completed"}\n']) == {"outcome": "completed"}
+
+
+def test_an_unwritable_out_is_refused_before_any_benchmark(tmp_path: Path) -> None:
+    (tmp_path / "file").write_text("x")
+    bad = tmp_path / "file" / "bench.json"
+    proc = subprocess.run([sys.executable, "-m", "bench", "--only", "mission", "--out",
+                           str(bad)], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and proc.stdout == ""  # nothing ran: no JSON document
+    assert f"--out: cannot write {bad}: Not a directory" in proc.stderr
