@@ -67,6 +67,9 @@ class Estimates:
     #: out: the way home ends with the docking approach and is often the longer one, and
     #: twice the longer of the two made a second cycle look 60 s longer than it was.
     home_s: float = 60.0
+    #: False until the way home has been driven once: until then `home_s` is a guess that an
+    #: activity may refine (the way out's pace over the way home's planned length).
+    home_measured: bool = False
 
     def return_s(self) -> float:
         """From the digging region to regolith out of the bin."""

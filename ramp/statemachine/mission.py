@@ -137,7 +137,6 @@ class Mission:
         self._pending_fault: str | None = None
         self._out_since: float | None = None
         self._home_since: float | None = None
-        self._home_measured = False  # the way home has been timed once
         self._dock_since: float | None = None
         self.visited: dict[str, int] = {}
         self.last_change: StateChange | None = None
@@ -444,7 +443,7 @@ class Mission:
         elif dest == "excavate" and self._out_since is not None:
             est.trip_s = Estimates.blend(est.trip_s, now - self._out_since)
             self._out_since = None
-            if not self._home_measured:
+            if not est.home_measured:
                 # Until the way home has been driven, it is taken as long as the way out
                 # as measured: the guess (`trip_estimate_s`) was 30 s short on a slow
                 # layout and sized the first dig for a second cycle that never fitted.
@@ -457,7 +456,7 @@ class Mission:
             if self._home_since is not None:
                 est.home_s = Estimates.blend(est.home_s, now - self._home_since)
                 self._home_since = None
-                self._home_measured = True
+                est.home_measured = True
             if self._dock_since is None:
                 self._dock_since = now
         if source == "decouple" and trigger == "finished" and self._dock_since is not None:

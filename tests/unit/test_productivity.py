@@ -25,10 +25,19 @@ def test_two_cycles_that_cannot_both_fill_the_bin_share_the_digging_evenly() -> 
     plan = plan_dig(400.0, 30.0, EST, FULL_S)
     assert plan.cycles == 2
     assert plan.dig_s == pytest.approx(80.0)
-    # 370 s left: two cycles dig 130 s (one: 120 s), 65 s each.
+
+
+def test_more_cycles_are_planned_only_when_they_gain_what_they_risk() -> None:
+    # 370 s left: two cycles would dig 130 s (65 s each) against one full bin (120 s): 10 s
+    # more if the second cycle fits, 55 s less if it does not. One cycle, digging until full.
     plan = plan_dig(370.0, 30.0, EST, FULL_S)
-    assert plan.cycles == 2
-    assert plan.dig_s == pytest.approx(65.0)
+    assert plan.cycles == 1
+    # Randomized seed 306 at its first dig: two shares of 76 s against one full bin of 120 s
+    # (32 s more, 44 s at risk). The way home then took 136 s, not 105, and the second cycle
+    # did not fit: one load of 23 kg where one full bin was 36 kg.
+    est = Estimates(trip_s=57.2, dock_deposit_s=35.0, min_dig_s=30.0, home_s=104.9)
+    plan = plan_dig(519.7, 30.0, est, 120.06)
+    assert plan.cycles == 1
 
 
 def test_an_even_share_keeps_the_second_cycle_when_the_way_home_is_slower_than_guessed(
@@ -60,10 +69,20 @@ def test_with_no_time_to_dig_it_plans_no_dig() -> None:
 
 
 def test_a_second_cycle_whose_dig_would_be_shorter_than_the_shortest_is_not_planned() -> None:
-    # 290 s left: 180 s to dig; two cycles would dig 25 s each (< 30 s): one dig of 120 s.
+    # 290 s left: 180 s to dig; two cycles would dig 25 s each (< 30 s): one cycle, which
+    # may dig all 180 s (the bin reading full ends it sooner).
     plan = plan_dig(290.0, 30.0, EST, FULL_S)
     assert plan.cycles == 1
-    assert plan.dig_s == pytest.approx(FULL_S)
+    assert plan.dig_s == pytest.approx(180.0)
+
+
+def test_the_only_cycle_left_digs_past_the_rate_estimate_until_the_bin_is_full() -> None:
+    """Randomized seed 309: the chain brought 0.277 kg/s against the 0.3 planned, and a dig
+    stopped at the estimate's 120 s with 33 kg in the bin and 226 s of the run unused."""
+    plan = plan_dig(486.0, 30.0, Estimates(trip_s=79.0, dock_deposit_s=35.0, min_dig_s=30.0,
+                                           home_s=109.0), FULL_S)
+    assert plan.cycles == 1
+    assert plan.dig_s == pytest.approx(486.0 - 30.0 - 109.0 - 35.0)
 
 
 def test_a_cycle_counts_the_way_out_and_the_way_home_each_once() -> None:

@@ -53,6 +53,9 @@ HEADING_SEARCHES = 3  # digging spots tried with the search over headings when t
 DOCK_GAP_M = 0.04  # the crossing home stops this short of the wall; Dock does the rest
 VANTAGE_TOLERANCE_M = 0.12  # already this near the vantage point (and facing +x): stay
 VANTAGE_YAW_DEG = 4.0
+#: `ctx.notes` key: the planned length (m) of the way out being driven, for the first dig's
+#: estimate of the way home (`Excavate`).
+OUT_M_NOTE = "out_m"
 
 
 class StartPlanners:
@@ -234,6 +237,7 @@ class PlanPathToDig(Step):
             return Status.failed(result.reason)
         ctx.plan = result
         kit.log["planned"].append(("dig", result))
+        ctx.notes.setdefault(OUT_M_NOTE, result.length_m)  # this leg's first plan (dig.py)
         spot = ctx.dig_spot
         return Status.done(f"to the spot at x {spot.pose.x:.2f} y {spot.pose.y:.2f}, "
                            f"{result.length_m:.1f} m")
@@ -248,6 +252,7 @@ class PlanPathHome(Step):
         if ctx.planner is None:
             return Status.failed("no map: the obstacles were not detected")
         result, dock = plan_home(ctx.planner, pose)
+        ctx.notes.pop(OUT_M_NOTE, None)  # a way out cut short is no measure of the pace
         if not result.ok:
             return Status.failed(result.reason)
         ctx.plan = result

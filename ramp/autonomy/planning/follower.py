@@ -126,7 +126,10 @@ class PathFollower:
         to_stop = seg_len - along if stops else math.inf
         pct = cfg.max_speed_pct
         if to_stop < cfg.slow_down_m:
-            pct = max(cfg.min_speed_pct, cfg.max_speed_pct * to_stop / cfg.slow_down_m)
+            # A constant deceleration (speed ~ the root of the distance left): speed falling in
+            # proportion to the distance crept the last decimetres at the floor, 2-3 s a stop.
+            pct = max(cfg.min_speed_pct,
+                      cfg.max_speed_pct * math.sqrt(to_stop / cfg.slow_down_m))
         v = pct / 100.0 * self.model.wheel_free_speed_m_s
         omega = v * curvature
         if self.path.reverse:
