@@ -22,10 +22,10 @@ from typing import Any
 
 from ramp.autonomy.hal import DRIVERS
 from ramp.autonomy.mount import Mount
-from ramp.common.hostport import format_hostport, parse_hostport
+from ramp.common.hostport import format_hostport, parse_hostport, valid_host
 from ramp.common.yamlload import LinedMap, YamlError, kind_of, parse_mapping, read_text
 from ramp.errors import ConfigError, ConfigErrors
-from ramp.schema import Field
+from ramp.schema import Field, shorten
 
 DEFAULT_BACKEND = ("127.0.0.1", 5577)
 DEFAULT_LIDAR_HOST = "192.168.0.10"  # the UTM-30LX-EW's factory address (SPEC 6.2)
@@ -195,7 +195,11 @@ def parse_address(text: str) -> tuple[str, int]:
     if not isinstance(text, str):
         raise ValueError(f"{text!r} is not an address; expected HOST:PORT (for example "
                          "192.168.1.10:5577)")
-    return parse_hostport(text, example="192.168.1.10:5577")
+    host, port = parse_hostport(text, example="192.168.1.10:5577")
+    if not valid_host(host):
+        raise ValueError(f"{shorten(repr(text))}: {shorten(repr(host))} is not an IP address "
+                         "or host name; expected HOST:PORT (for example 192.168.1.10:5577)")
+    return host, port
 
 
 class _Checker:
@@ -306,6 +310,10 @@ def _lidar(c: _Checker, root: LinedMap) -> LidarConfig:
     if raw is None:
         return LidarConfig()
     v = c.values(raw, "lidar", LIDAR_FIELDS, nested=frozenset({"mount"}))
+    if not valid_host(v["host"]):  # "" would reach this computer, not the scanner
+        c.err("lidar.host", raw.line_of("host"), f"{shorten(repr(v['host']))} is not an IP "
+              f"address or host name (the UTM-30LX-EW's factory one is {DEFAULT_LIDAR_HOST})")
+        v["host"] = DEFAULT_LIDAR_HOST
     return LidarConfig(host=v["host"], port=v["port"], mount=c.mount(raw, "mount", "lidar.mount"))
 
 

@@ -160,6 +160,19 @@ def test_bad_backend_addresses_are_refused(text: str) -> None:
         parse_address(text)
 
 
+@pytest.mark.parametrize("host", ["", "ü☃", "a..b", "999.1.1.1", "10", "h:5", "-x", "x" * 300])
+def test_a_host_that_is_no_address_is_refused_at_its_line(host: str) -> None:
+    """`lidar: {host: ""}` connected to this computer, not to the scanner; a backend named
+    `ü☃:5577` failed only once the robot was on the field."""
+    (error,) = errors_of(f"lidar:\n  host: '{host}'\n")
+    assert error.startswith("a.yaml:2: lidar.host: ")
+    assert "is not an IP address or host name" in error and "192.168.0.10" in error
+    if host and ":" not in host:
+        (error,) = errors_of(f"backend: '{host}:5577'\n")
+        assert error.startswith("a.yaml:1: backend: ")
+        assert "is not an IP address or host name; expected HOST:PORT" in error
+
+
 def test_an_unreadable_file_is_one_error_naming_it(tmp_path: Path) -> None:
     cfg, errors = check_config(tmp_path / "nope.yaml")
     assert cfg is None and len(errors) == 1 and "nope.yaml: cannot read" in str(errors[0])
