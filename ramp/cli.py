@@ -9,10 +9,12 @@ import os
 import signal
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING
 
 from ramp import __version__
+from ramp.common.files import why
 from ramp.config import Config, check_config, valid_host
 from ramp.errors import ConfigError, RampError
 
@@ -208,10 +210,20 @@ def host_name(text: str) -> str:
 
 
 def record_dir(text: str) -> str:
-    """`--record DIR`: a directory path (made if missing; relative to the working
-    directory)."""
+    """`--record DIR`: a directory path (made if missing, here, as the command line is read;
+    relative to the working directory). A path that can never be a directory (a file, a
+    device, a path below a file) is a usage error: the supervisor used to run for hours
+    recording nothing, with one warning every 5 s."""
     if not text.strip():
         raise argparse.ArgumentTypeError("expected a directory for the MCAP files")
+    try:
+        Path(text).mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise argparse.ArgumentTypeError(
+            f"cannot record into {text}: it is not a directory; expected a directory for "
+            "the MCAP files") from None
+    except OSError as exc:
+        raise argparse.ArgumentTypeError(f"cannot record into {text}: {why(exc)}") from None
     return text
 
 
