@@ -50,7 +50,7 @@ LIDAR_FIELDS = {
     "port": Field(int, DEFAULT_LIDAR_PORT, lo=1, hi=65535, what="a TCP port"),
 }
 
-_SERIAL = Field(int, -1, lo=-1, what="a Phidget serial number or -1 for any")
+_SERIAL = Field(int, -1, lo=-1, hi=2**31 - 1, what="a Phidget serial number or -1 for any")
 _HUB_PORT = Field(int, -1, lo=-1, hi=5, what="a VINT hub port or -1 for any")
 _ATTACH = Field(float, 2.0, lo=0.05, hi=60.0, what="a time in s")
 

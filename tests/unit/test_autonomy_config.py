@@ -173,6 +173,15 @@ def test_a_host_that_is_no_address_is_refused_at_its_line(host: str) -> None:
         assert "is not an IP address or host name; expected HOST:PORT" in error
 
 
+def test_a_phidget_serial_past_32_bits_is_refused() -> None:
+    """Phidget22 cuts a serial to 32 bits: 4294967296 + N would match board N."""
+    found = errors_of("imu: {serial: 4295267297}\ngimbal: {serial: 2147483648}\n")
+    assert "a.yaml:1: imu.serial: 4295267297 is not a Phidget serial number or -1 for any " \
+        "(-1-2147483647)" in found
+    assert "a.yaml:2: gimbal.serial: 2147483648 is not a Phidget serial number or -1 for " \
+        "any (-1-2147483647)" in found
+
+
 def test_an_unreadable_file_is_one_error_naming_it(tmp_path: Path) -> None:
     cfg, errors = check_config(tmp_path / "nope.yaml")
     assert cfg is None and len(errors) == 1 and "nope.yaml: cannot read" in str(errors[0])
