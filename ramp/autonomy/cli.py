@@ -35,7 +35,7 @@ import sys
 from collections.abc import Sequence
 from types import FrameType
 
-from ramp.autonomy.config import AutonomyConfig, check_config, parse_address
+from ramp.autonomy.config import AutonomyConfig, check_config, parse_address, tunable_notes
 from ramp.common.hostport import format_hostport
 
 DEFAULT_CONFIG = "autonomy.yaml"
@@ -106,6 +106,8 @@ def cmd_check(path: str) -> int:
     print(f"{path}: ok")
     for line in summary(cfg):
         print(f"  {line}")
+    for note in tunable_notes(cfg):
+        print(f"  note: {note}")
     return 0
 
 
@@ -133,6 +135,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             return 2
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    for note in tunable_notes(cfg):
+        logging.getLogger("ramp.autonomy").warning("%s: %s", args.config, note)
     return run_on_robot(cfg, backend, start_box=args.start_box, foxglove_port=port,
                         foxglove_origins=args.foxglove_origin)
 

@@ -13,6 +13,7 @@ Blocks are field tables (`ramp.schema.Field`): a later feature adds a key by add
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -188,6 +189,20 @@ class AutonomyConfig:
     @property
     def backend(self) -> str:
         return format_hostport(self.backend_host, self.backend_port)
+
+
+def tunable_notes(cfg: AutonomyConfig) -> list[str]:
+    """`mission.NAME is not a tunable this version reads (did you mean …?)` for each name in
+    `mission:` that no code reads. They are accepted (a later mission may read more), but a
+    misspelt `drive_speed_pcnt: 20` left the robot at the default 60 % without a word."""
+    notes = []
+    for name in cfg.mission:
+        if name not in MISSION_FIELDS:
+            near = difflib.get_close_matches(name, MISSION_FIELDS, n=1)
+            hint = f" (did you mean {near[0]}?)" if near else ""
+            notes.append(f"mission.{name} is not a tunable this version reads{hint}; "
+                         "it is ignored")
+    return notes
 
 
 def parse_address(text: str) -> tuple[str, int]:

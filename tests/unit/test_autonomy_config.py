@@ -196,6 +196,22 @@ def test_check_prints_ok_for_the_example(capsys: pytest.CaptureFixture[str]) -> 
     assert out.startswith(f"{EXAMPLE}: ok") and "pan channel 0 -90..90 deg" in out
 
 
+def test_check_notes_a_tunable_no_code_reads(tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """A misspelt tunable is accepted (a later mission may read more names), but it was
+    silently ignored: `drive_speed_pcnt: 20` left the robot at 60 %."""
+    path = tmp_path / "a.yaml"
+    path.write_text("mission: {drive_speed_pcnt: 20, duration_s: 300, zzz: 1}\n")
+    assert main(["check", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "  note: mission.drive_speed_pcnt is not a tunable this version reads (did you " \
+        "mean drive_speed_pct?); it is ignored\n" in out
+    assert "  note: mission.zzz is not a tunable this version reads; it is ignored" in out
+    assert "duration_s" not in out
+    assert main(["check", str(EXAMPLE)]) == 0
+    assert "note:" not in capsys.readouterr().out
+
+
 def test_check_lists_every_error_and_fails(tmp_path: Path,
                                            capsys: pytest.CaptureFixture[str]) -> None:
     bad = tmp_path / "autonomy.yaml"
