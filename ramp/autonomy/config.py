@@ -197,7 +197,8 @@ def tunable_notes(cfg: AutonomyConfig) -> list[str]:
     misspelt `drive_speed_pcnt: 20` left the robot at the default 60 % without a word."""
     notes = []
     for name in cfg.mission:
-        if name not in MISSION_FIELDS:
+        if name not in MISSION_FIELDS and not (name.startswith("timeout_")
+                                               and name.endswith("_s")):
             near = difflib.get_close_matches(name, MISSION_FIELDS, n=1)
             hint = f" (did you mean {near[0]}?)" if near else ""
             notes.append(f"mission.{name} is not a tunable this version reads{hint}; "
@@ -420,4 +421,15 @@ def _mission(c: _Checker, root: LinedMap) -> dict[str, float]:
                 raise ValueError(f"{value!r} is not a number")
         except ValueError as exc:
             c.err(path, line, str(exc))
+            continue
+        if k.startswith("timeout_") and k.endswith("_s"):
+            # the state machine's own check, here rather than when the mission is built
+            # (`timeout_nosuch_s: 5` passed the check and `ramp sim mission` ended in a
+            # traceback)
+            from ramp.statemachine.settings import MissionConfig
+
+            try:
+                MissionConfig.from_mapping({k: out[k]})
+            except ConfigError as exc:
+                c.err(path, line, exc.detail)
     return out

@@ -196,18 +196,30 @@ def test_check_prints_ok_for_the_example(capsys: pytest.CaptureFixture[str]) -> 
     assert out.startswith(f"{EXAMPLE}: ok") and "pan channel 0 -90..90 deg" in out
 
 
+def test_a_state_timeout_is_checked_with_the_file() -> None:
+    """`timeout_nosuch_s: 5` passed `ramp-autonomy check`; the state machine refused it only
+    when the mission was built (`ramp sim mission --config` ended in a traceback)."""
+    cfg, errors = parse_config("mission: {timeout_excavate_s: 240}\n")
+    assert errors == [] and cfg is not None and cfg.mission["timeout_excavate_s"] == 240
+    found = errors_of("mission:\n  timeout_nosuch_s: 5\n  timeout_stop_s: -1\n")
+    assert found[0].startswith("a.yaml:2: mission.timeout_nosuch_s: no state named 'nosuch' "
+                               "has a timeout (states: acquire_control, ")
+    assert found[1] == "a.yaml:3: mission.timeout_stop_s: -1 is not a time in s (> 0)"
+
+
 def test_check_notes_a_tunable_no_code_reads(tmp_path: Path,
                                              capsys: pytest.CaptureFixture[str]) -> None:
     """A misspelt tunable is accepted (a later mission may read more names), but it was
     silently ignored: `drive_speed_pcnt: 20` left the robot at 60 %."""
     path = tmp_path / "a.yaml"
-    path.write_text("mission: {drive_speed_pcnt: 20, duration_s: 300, zzz: 1}\n")
+    path.write_text("mission: {drive_speed_pcnt: 20, duration_s: 300, zzz: 1, "
+                    "timeout_dock_s: 90}\n")
     assert main(["check", str(path)]) == 0
     out = capsys.readouterr().out
     assert "  note: mission.drive_speed_pcnt is not a tunable this version reads (did you " \
         "mean drive_speed_pct?); it is ignored\n" in out
     assert "  note: mission.zzz is not a tunable this version reads; it is ignored" in out
-    assert "duration_s" not in out
+    assert "duration_s" not in out and "timeout_dock_s" not in out
     assert main(["check", str(EXAMPLE)]) == 0
     assert "note:" not in capsys.readouterr().out
 
