@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 from ramp import __version__
 from ramp.common.files import why
+from ramp.common.hostport import format_hostport
 from ramp.config import Config, check_config, valid_host
 from ramp.errors import ConfigError, RampError
 
@@ -159,8 +160,8 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
         sup.start()
     except Exception as exc:  # noqa: BLE001 - whatever failed, the motors must be stopped
         if isinstance(exc, OSError):
-            log.error("cannot serve on %s:%s: %s", sup.server.host, sup.server.port,
-                      exc.strerror)
+            log.error("cannot serve on %s: %s",
+                      format_hostport(sup.server.host, sup.server.port), exc.strerror)
         else:
             log.exception("start-up failed")
         sup.shutdown()
@@ -177,8 +178,9 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
     gc.freeze()
     if not sup.scheduler.stopping:  # a signal during start-up: never announce ready
         h, p = sup.server.address
-        print(f"ramp: ready on {h}:{p}", flush=True)
-        notifier.ready(f"serving on {h}:{p}")
+        # an IPv6 address in brackets (`[::1]:5577`), as ramp-shell and every client take it
+        print(f"ramp: ready on {format_hostport(h, p)}", flush=True)
+        notifier.ready(f"serving on {format_hostport(h, p)}")
     try:
         sup.scheduler.run()
     finally:
