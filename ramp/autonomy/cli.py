@@ -34,6 +34,7 @@ import signal
 import sys
 from collections.abc import Sequence
 from types import FrameType
+from urllib.parse import urlsplit
 
 from ramp.autonomy.config import AutonomyConfig, check_config, parse_address, tunable_notes
 from ramp.common.hostport import format_hostport
@@ -56,6 +57,27 @@ def summary(cfg: AutonomyConfig) -> list[str]:
     ]
 
 
+def web_origin(text: str) -> str:
+    """`--foxglove-origin`: a web page's origin as a browser sends it (`https://HOST[:PORT]`,
+    no path), scheme and host in lower case. Anything else never matched any page, so the
+    operator's `--foxglove-origin '*'` or `https://app.foxglove.dev/` + a path was refused
+    without a word."""
+    try:
+        parts = urlsplit(text.strip())
+        port = parts.port  # ValueError when it is no port number
+    except ValueError:
+        parts, port = None, None
+    if (parts is None or parts.scheme.lower() not in ("http", "https") or not parts.hostname
+            or parts.username is not None or parts.path not in ("", "/") or parts.query
+            or parts.fragment):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a web page's origin; expected http(s)://HOST[:PORT] with "
+            "nothing after it, e.g. https://app.foxglove.dev")
+    host = parts.hostname.lower()
+    host = f"[{host}]" if ":" in host else host
+    return f"{parts.scheme.lower()}://{host}" + (f":{port}" if port is not None else "")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ramp-autonomy",
@@ -75,6 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
                              "foxglove.websocket.v1) on 127.0.0.1:P; 0 picks a free port, "
                              "printed (needs the `foxglove` extra)")
     parser.add_argument("--foxglove-origin", action="append", default=[], metavar="ORIGIN",
+                        type=web_origin,
                         help="a web page's origin allowed to open the live view besides "
                              "local ones (repeatable), e.g. https://app.foxglove.dev")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")

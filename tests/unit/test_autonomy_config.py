@@ -224,6 +224,27 @@ def test_check_notes_a_tunable_no_code_reads(tmp_path: Path,
     assert "note:" not in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("origin", ["*", "not a url", "https://app.foxglove.dev/studio",
+                                    "javascript:alert(1)", "", "http://h:99999"])
+def test_a_foxglove_origin_no_browser_sends_is_a_usage_error(
+        origin: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """`--foxglove-origin '*'` or a page's address with a path never matched any browser's
+    Origin: the page was refused while the operator thought it allowed."""
+    with pytest.raises(SystemExit) as exc:
+        main(["--backend", "127.0.0.1:1", "--foxglove-origin", origin])
+    assert exc.value.code == 2
+    assert "is not a web page's origin; expected http(s)://HOST[:PORT]" in \
+        capsys.readouterr().err
+
+
+def test_a_foxglove_origin_is_kept_as_a_browser_sends_it() -> None:
+    from ramp.autonomy.cli import build_parser
+
+    args = build_parser().parse_args(["--foxglove-origin", "https://App.Foxglove.dev/",
+                                      "--foxglove-origin", "http://[::1]:8080"])
+    assert args.foxglove_origin == ["https://app.foxglove.dev", "http://[::1]:8080"]
+
+
 def test_check_lists_every_error_and_fails(tmp_path: Path,
                                            capsys: pytest.CaptureFixture[str]) -> None:
     bad = tmp_path / "autonomy.yaml"
