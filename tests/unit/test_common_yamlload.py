@@ -150,6 +150,15 @@ def test_numbers_with_an_exponent_are_numbers_as_in_yaml_1_2(tmp_path: Path) -> 
     assert errors == [] and ramp is not None and ramp.watchdog_timeout == 0.5
 
 
+@pytest.mark.parametrize("name", ["", " "])
+def test_an_empty_file_name_says_so(name: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """`ramp check ""` and `--config ""` said only `cannot read: no such file`."""
+    with pytest.raises(YamlError, match="cannot read: the file name is empty"):
+        read_text(name)
+    cfg, errors = check_ramp(name)
+    assert cfg is None and [e.detail for e in errors] == ["cannot read: the file name is empty"]
+
+
 def test_compose_has_the_same_limits() -> None:
     with pytest.raises(YamlError, match="alias bomb"):
         compose(BOMB)
