@@ -71,6 +71,14 @@ def parse_world(text: str, name: str = "world.yaml", mp: MarteParams | None = No
     return layout
 
 
+#: Smallest obstacle diameter: below it a crater's profile (depth / r^2) overflowed and the
+#: ray caster returned NaN ranges (d: 1e-300 was accepted); a 1 cm obstacle is already far
+#: below the LIDAR's resolution at the arena's distances.
+MIN_DIAMETER_M = 0.01
+#: Tallest rock and deepest crater: the walls stand 1 m; 10 m leaves room for any course, and
+#: `depth: 1.0e+308` overflowed the same way (the mission then detected no obstacle at all).
+MAX_SIZE_M = 10.0
+
 _TOP = ("start", "rocks", "craters", "description")
 _START = ("box", "heading", "x", "y", "yaw")
 _ROCK = ("x", "y", "d", "height")
@@ -138,6 +146,16 @@ class _Checker:
             self.err(f"{path}.{key}", line, f"expected {what}, got {shown(value)}")
             return None
         return float(value)
+
+    def at_most(self, node: LinedMap, key: str, path: str, value: float | None
+                ) -> float | None:
+        """A rock's height or a crater's depth up to `MAX_SIZE_M`; None (and an error)
+        above it."""
+        if value is not None and value > MAX_SIZE_M:
+            self.err(f"{path}.{key}", node.lines.get(key, node.line),
+                     f"expected at most {MAX_SIZE_M:g} m, got {value:g}")
+            return None
+        return value
 
     def start(self, root: LinedMap) -> StartSpec | None:
         if "start" not in root:
@@ -235,6 +253,10 @@ class _Checker:
         y = self.number(node, "y", path, "a y in metres", required=True)
         d = self.number(node, "d", path, "a diameter in metres > 0", required=True, lo=0.0,
                         lo_open=True)
+        if d is not None and d < MIN_DIAMETER_M:
+            self.err(f"{path}.d", node.lines.get("d", node.line),
+                     f"expected a diameter of {MIN_DIAMETER_M:g} m or more, got {d:g}")
+            d = None
         if x is None or y is None or d is None:
             return None
         r = d / 2.0
@@ -246,8 +268,9 @@ class _Checker:
 
     def rock(self, node: LinedMap, path: str) -> Rock | None:
         disc = self.disc(node, path, _ROCK)
-        height = self.number(node, "height", path, "a height in metres > 0", required=False,
-                             lo=0.0, lo_open=True)
+        height = self.at_most(node, "height", path, self.number(
+            node, "height", path, "a height in metres > 0", required=False, lo=0.0,
+            lo_open=True))
         if disc is None:
             return None
         x, y, d = disc
@@ -256,8 +279,9 @@ class _Checker:
 
     def crater(self, node: LinedMap, path: str) -> Crater | None:
         disc = self.disc(node, path, _CRATER)
-        depth = self.number(node, "depth", path, "a depth in metres > 0", required=False,
-                            lo=0.0, lo_open=True)
+        depth = self.at_most(node, "depth", path, self.number(
+            node, "depth", path, "a depth in metres > 0", required=False, lo=0.0,
+            lo_open=True))
         if disc is None:
             return None
         x, y, d = disc

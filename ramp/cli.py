@@ -9,10 +9,13 @@ import os
 import signal
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING
 
 from ramp import __version__
+from ramp.common.files import why
+from ramp.common.hostport import format_hostport
 from ramp.config import Config, check_config, valid_host
 from ramp.errors import ConfigError, RampError
 
@@ -157,8 +160,8 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
         sup.start()
     except Exception as exc:  # noqa: BLE001 - whatever failed, the motors must be stopped
         if isinstance(exc, OSError):
-            log.error("cannot serve on %s:%s: %s", sup.server.host, sup.server.port,
-                      exc.strerror)
+            log.error("cannot serve on %s: %s",
+                      format_hostport(sup.server.host, sup.server.port), exc.strerror)
         else:
             log.exception("start-up failed")
         sup.shutdown()
@@ -175,8 +178,9 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
     gc.freeze()
     if not sup.scheduler.stopping:  # a signal during start-up: never announce ready
         h, p = sup.server.address
-        print(f"ramp: ready on {h}:{p}", flush=True)
-        notifier.ready(f"serving on {h}:{p}")
+        # an IPv6 address in brackets (`[::1]:5577`), as ramp-shell and every client take it
+        print(f"ramp: ready on {format_hostport(h, p)}", flush=True)
+        notifier.ready(f"serving on {format_hostport(h, p)}")
     try:
         sup.scheduler.run()
     finally:
@@ -208,10 +212,20 @@ def host_name(text: str) -> str:
 
 
 def record_dir(text: str) -> str:
-    """`--record DIR`: a directory path (made if missing; relative to the working
-    directory)."""
+    """`--record DIR`: a directory path (made if missing, here, as the command line is read;
+    relative to the working directory). A path that can never be a directory (a file, a
+    device, a path below a file) is a usage error: the supervisor used to run for hours
+    recording nothing, with one warning every 5 s."""
     if not text.strip():
         raise argparse.ArgumentTypeError("expected a directory for the MCAP files")
+    try:
+        Path(text).mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise argparse.ArgumentTypeError(
+            f"cannot record into {text}: it is not a directory; expected a directory for "
+            "the MCAP files") from None
+    except OSError as exc:
+        raise argparse.ArgumentTypeError(f"cannot record into {text}: {why(exc)}") from None
     return text
 
 

@@ -63,6 +63,9 @@ class Field:
             raise ValueError(f"{shorten(repr(value))} is not {self.expected()}")
         if isinstance(v, float) and not math.isfinite(v):
             raise ValueError(f"{shorten(repr(value))} is not {self.expected()}")
+        if isinstance(v, str) and self.required and not v.strip():
+            # `port: ""` passed the check, then the bus retried "cannot open : ..." for ever
+            raise ValueError(f"{shorten(repr(value))} is not {self.expected()}")
         if self.choices is not None and v not in self.choices:
             raise ValueError(f"{shorten(repr(value))} is not {self.expected()}")
         if isinstance(v, int | float) and not isinstance(v, bool) and (

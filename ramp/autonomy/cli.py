@@ -34,8 +34,9 @@ import signal
 import sys
 from collections.abc import Sequence
 from types import FrameType
+from urllib.parse import urlsplit
 
-from ramp.autonomy.config import AutonomyConfig, check_config, parse_address
+from ramp.autonomy.config import AutonomyConfig, check_config, parse_address, tunable_notes
 from ramp.common.hostport import format_hostport
 
 DEFAULT_CONFIG = "autonomy.yaml"
@@ -54,6 +55,27 @@ def summary(cfg: AutonomyConfig) -> list[str]:
         f"{g.tilt.min_deg:g}..{g.tilt.max_deg:g} deg",
         f"mission {len(cfg.mission)} tunables",
     ]
+
+
+def web_origin(text: str) -> str:
+    """`--foxglove-origin`: a web page's origin as a browser sends it (`https://HOST[:PORT]`,
+    no path), scheme and host in lower case. Anything else never matched any page, so the
+    operator's `--foxglove-origin '*'` or `https://app.foxglove.dev/` + a path was refused
+    without a word."""
+    try:
+        parts = urlsplit(text.strip())
+        port = parts.port  # ValueError when it is no port number
+    except ValueError:
+        parts, port = None, None
+    if (parts is None or parts.scheme.lower() not in ("http", "https") or not parts.hostname
+            or parts.username is not None or parts.path not in ("", "/") or parts.query
+            or parts.fragment):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a web page's origin; expected http(s)://HOST[:PORT] with "
+            "nothing after it, e.g. https://app.foxglove.dev")
+    host = parts.hostname.lower()
+    host = f"[{host}]" if ":" in host else host
+    return f"{parts.scheme.lower()}://{host}" + (f":{port}" if port is not None else "")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -75,6 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
                              "foxglove.websocket.v1) on 127.0.0.1:P; 0 picks a free port, "
                              "printed (needs the `foxglove` extra)")
     parser.add_argument("--foxglove-origin", action="append", default=[], metavar="ORIGIN",
+                        type=web_origin,
                         help="a web page's origin allowed to open the live view besides "
                              "local ones (repeatable), e.g. https://app.foxglove.dev")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -106,6 +129,8 @@ def cmd_check(path: str) -> int:
     print(f"{path}: ok")
     for line in summary(cfg):
         print(f"  {line}")
+    for note in tunable_notes(cfg):
+        print(f"  note: {note}")
     return 0
 
 
@@ -133,6 +158,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             return 2
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    for note in tunable_notes(cfg):
+        logging.getLogger("ramp.autonomy").warning("%s: %s", args.config, note)
     return run_on_robot(cfg, backend, start_box=args.start_box, foxglove_port=port,
                         foxglove_origins=args.foxglove_origin)
 

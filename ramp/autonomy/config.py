@@ -13,6 +13,7 @@ Blocks are field tables (`ramp.schema.Field`): a later feature adds a key by add
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -22,10 +23,10 @@ from typing import Any
 
 from ramp.autonomy.hal import DRIVERS
 from ramp.autonomy.mount import Mount
-from ramp.common.hostport import format_hostport, parse_hostport
+from ramp.common.hostport import format_hostport, parse_hostport, valid_host
 from ramp.common.yamlload import LinedMap, YamlError, kind_of, parse_mapping, read_text
 from ramp.errors import ConfigError, ConfigErrors
-from ramp.schema import Field
+from ramp.schema import Field, shorten
 
 DEFAULT_BACKEND = ("127.0.0.1", 5577)
 DEFAULT_LIDAR_HOST = "192.168.0.10"  # the UTM-30LX-EW's factory address (SPEC 6.2)
@@ -50,7 +51,7 @@ LIDAR_FIELDS = {
     "port": Field(int, DEFAULT_LIDAR_PORT, lo=1, hi=65535, what="a TCP port"),
 }
 
-_SERIAL = Field(int, -1, lo=-1, what="a Phidget serial number or -1 for any")
+_SERIAL = Field(int, -1, lo=-1, hi=2**31 - 1, what="a Phidget serial number or -1 for any")
 _HUB_PORT = Field(int, -1, lo=-1, hi=5, what="a VINT hub port or -1 for any")
 _ATTACH = Field(float, 2.0, lo=0.05, hi=60.0, what="a time in s")
 
@@ -190,12 +191,31 @@ class AutonomyConfig:
         return format_hostport(self.backend_host, self.backend_port)
 
 
+def tunable_notes(cfg: AutonomyConfig) -> list[str]:
+    """`mission.NAME is not a tunable this version reads (did you mean …?)` for each name in
+    `mission:` that no code reads. They are accepted (a later mission may read more), but a
+    misspelt `drive_speed_pcnt: 20` left the robot at the default 60 % without a word."""
+    notes = []
+    for name in cfg.mission:
+        if name not in MISSION_FIELDS and not (name.startswith("timeout_")
+                                               and name.endswith("_s")):
+            near = difflib.get_close_matches(name, MISSION_FIELDS, n=1)
+            hint = f" (did you mean {near[0]}?)" if near else ""
+            notes.append(f"mission.{name} is not a tunable this version reads{hint}; "
+                         "it is ignored")
+    return notes
+
+
 def parse_address(text: str) -> tuple[str, int]:
     """`HOST:PORT` (or `[v6]:PORT`) -> (host, port); ValueError says what was expected."""
     if not isinstance(text, str):
         raise ValueError(f"{text!r} is not an address; expected HOST:PORT (for example "
                          "192.168.1.10:5577)")
-    return parse_hostport(text, example="192.168.1.10:5577")
+    host, port = parse_hostport(text, example="192.168.1.10:5577")
+    if not valid_host(host):
+        raise ValueError(f"{shorten(repr(text))}: {shorten(repr(host))} is not an IP address "
+                         "or host name; expected HOST:PORT (for example 192.168.1.10:5577)")
+    return host, port
 
 
 class _Checker:
@@ -306,6 +326,10 @@ def _lidar(c: _Checker, root: LinedMap) -> LidarConfig:
     if raw is None:
         return LidarConfig()
     v = c.values(raw, "lidar", LIDAR_FIELDS, nested=frozenset({"mount"}))
+    if not valid_host(v["host"]):  # "" would reach this computer, not the scanner
+        c.err("lidar.host", raw.line_of("host"), f"{shorten(repr(v['host']))} is not an IP "
+              f"address or host name (the UTM-30LX-EW's factory one is {DEFAULT_LIDAR_HOST})")
+        v["host"] = DEFAULT_LIDAR_HOST
     return LidarConfig(host=v["host"], port=v["port"], mount=c.mount(raw, "mount", "lidar.mount"))
 
 
@@ -397,4 +421,15 @@ def _mission(c: _Checker, root: LinedMap) -> dict[str, float]:
                 raise ValueError(f"{value!r} is not a number")
         except ValueError as exc:
             c.err(path, line, str(exc))
+            continue
+        if k.startswith("timeout_") and k.endswith("_s"):
+            # the state machine's own check, here rather than when the mission is built
+            # (`timeout_nosuch_s: 5` passed the check and `ramp sim mission` ended in a
+            # traceback)
+            from ramp.statemachine.settings import MissionConfig
+
+            try:
+                MissionConfig.from_mapping({k: out[k]})
+            except ConfigError as exc:
+                c.err(path, line, exc.detail)
     return out

@@ -28,6 +28,8 @@ class NotRegularFile(OSError):
 def open_regular(path: str | Path) -> tuple[int, int]:
     """(descriptor, size) of a regular file opened for reading; NotRegularFile otherwise.
     The caller closes the descriptor (`os.fdopen(fd, "rb")` does on close)."""
+    if not str(path).strip():  # `--config ""` said only "cannot read: no such file"
+        raise NotRegularFile("cannot read: the file name is empty")
     flags = os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | getattr(os, "O_CLOEXEC", 0)
     try:
         fd = os.open(path, flags)

@@ -12,6 +12,7 @@ what was expected, fit for a command line or a config error.
 from __future__ import annotations
 
 import ipaddress
+import re
 
 DEFAULT_EXAMPLE = "192.168.0.20:5577"
 
@@ -62,6 +63,24 @@ def parse_hostport(text: str, *, default_host: str | None = None,
     if not port_text.isdigit() or not 1 <= int(port_text) <= 65535:
         raise bad(f"port {port_text!r} is not a port number 1-65535")
     return host, int(port_text)
+
+
+_HOST_LABEL = re.compile(r"[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?")
+
+
+def valid_host(host: str) -> bool:
+    """An IPv4 or IPv6 address, or a host name (letters, digits, `-`, dots between labels).
+    Four numbers that are not an IPv4 address (999.1.1.1) are neither."""
+    try:
+        ipaddress.ip_address(host)
+        return True
+    except ValueError:
+        pass
+    name = host[:-1] if host.endswith(".") else host
+    labels = name.split(".")
+    if not name or len(name) > 253 or all(label.isdigit() for label in labels):
+        return False
+    return all(_HOST_LABEL.fullmatch(label) for label in labels)
 
 
 def format_hostport(host: str, port: int) -> str:

@@ -7,6 +7,8 @@ comes through here, so each gets the same limits and the same kind of error:
   `/dev/stdin` is refused before a byte is read, never waited on), at most `max_bytes`
   (checked on the open file's size first, and again while reading), UTF-8 (a bad byte is
   named with its line and column).
+- Numbers as YAML 1.2 writes them: `5e-1` and `1.0e308` are floats, not the text PyYAML's
+  YAML 1.1 rules make of them.
 - `parse(text)` / `compose(text)`: PyYAML's safe loader with a nesting limit (`MAX_DEPTH`),
   an alias-expansion limit (`MAX_NODES`, counted at every use, so an alias bomb fails at
   once), NUL and other characters YAML forbids reported at their line, and a value Python
@@ -22,6 +24,7 @@ their key path and turn it into their own error type. Nothing here knows any fil
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -243,6 +246,13 @@ def _sequence(loader: _Loader, node: yaml.SequenceNode) -> LinedList:
     return out
 
 
+# YAML 1.1 (PyYAML) reads `5e-1`, `6e2` and `1.0e308` as text: a float needs a dot and a
+# signed exponent there. YAML 1.2, JSON and every person read them as numbers, and the error
+# that followed (`'5e-1' is not a timeout in seconds (0.05-60)`) named a value in range.
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."))
 _Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _mapping)
 _Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _sequence)
 

@@ -18,7 +18,6 @@ says: explicit keys override merged ones.
 
 from __future__ import annotations
 
-import ipaddress
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -26,6 +25,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
+from ramp.common.hostport import valid_host
 from ramp.common.yamlload import (
     MAX_FILE_BYTES,
     BadKey,
@@ -48,7 +48,6 @@ from ramp.schema import Block, Field, shorten, validate
 
 #: A module's name is an MCP name (`base:base.get=()`), and `robot` is taken.
 MODULE_NAME = re.compile(r"[A-Za-z0-9_]{1,32}")
-_HOST_LABEL = re.compile(r"[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?")
 
 
 SERVER_FIELDS = {
@@ -264,21 +263,6 @@ def _check_host(c: _Checker, root: LinedMap, server: dict[str, Any]) -> None:
         c.err("server.host", line, f"{shorten(repr(host), 60)} is not an IP address or host "
                                    "name (0.0.0.0 serves on every interface)")
         server["host"] = SERVER_FIELDS["host"].default
-
-
-def valid_host(host: str) -> bool:
-    """An IPv4 or IPv6 address, or a host name (letters, digits, `-`, dots between labels).
-    Four numbers that are not an IPv4 address (999.1.1.1) are neither."""
-    try:
-        ipaddress.ip_address(host)
-        return True
-    except ValueError:
-        pass
-    name = host[:-1] if host.endswith(".") else host
-    labels = name.split(".")
-    if not name or len(name) > 253 or all(label.isdigit() for label in labels):
-        return False
-    return all(_HOST_LABEL.fullmatch(label) for label in labels)
 
 
 def _lines(root: LinedMap, section: str) -> dict[str, int]:

@@ -81,7 +81,10 @@ class ODriveBus(Bus):
 
     driver_name = "can"
     fields: ClassVar[dict[str, Field]] = {
-        "interface": Field(str, "virtual", what="a python-can interface name"),
+        # python-can's own list (plugins included): an unknown name passed the check, then
+        # the bus retried "Unknown interface type" once a second for ever.
+        "interface": Field(str, "virtual", choices=tuple(sorted(can.interfaces.VALID_INTERFACES)),
+                           what="a python-can interface name"),
         "channel": Field(str, what="a CAN channel (can0, or any name on virtual)"),
         "bitrate": Field(int, 500000, lo=10000, hi=1000000, what="a CAN bitrate in bit/s"),
         "heartbeat_timeout": Field(float, 0.5, lo=0.05, hi=10.0,

@@ -17,6 +17,14 @@ from typing import Any
 from ramp.common.outputs import output_file
 
 
+def _recording(text: str) -> Path:
+    """A recording's path; an empty one is a usage error (`Path("")` is `.`, and the command
+    said `.: cannot read: it is a directory`)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a recording (FILE.mcap), got an empty name")
+    return Path(text)
+
+
 def add_log_parser(sub: Any) -> argparse.ArgumentParser:
     """Register `log summary` and `log plot` on an argparse subparsers object."""
     log = sub.add_parser("log", help="read flight recordings (MCAP files)",
@@ -24,12 +32,12 @@ def add_log_parser(sub: Any) -> argparse.ArgumentParser:
                          formatter_class=argparse.RawDescriptionHelpFormatter)
     cmds = log.add_subparsers(dest="log_command", required=True)
     summary = cmds.add_parser("summary", help="what happened in a recorded run")
-    summary.add_argument("files", nargs="+", type=Path, metavar="FILE.mcap")
+    summary.add_argument("files", nargs="+", type=_recording, metavar="FILE.mcap")
     summary.add_argument("--json", action="store_true", help="one JSON document on stdout")
     _progress_flags(summary)
     summary.set_defaults(func=cmd_summary)
     plot = cmds.add_parser("plot", help="draw a recorded run's time series")
-    plot.add_argument("files", nargs="+", type=Path, metavar="FILE.mcap")
+    plot.add_argument("files", nargs="+", type=_recording, metavar="FILE.mcap")
     plot.add_argument("-o", "--out", type=_output_path, required=True, metavar="FILE.png",
                       help="the picture to write (PNG; .svg and .pdf work too)")
     plot.add_argument("--title", default=None, help="title (default: the file names)")

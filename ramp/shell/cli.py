@@ -48,6 +48,9 @@ MAX_TIMEOUT_S = 3600.0  # an hour: beyond it (1e308) the socket layer overflows
 #: At most this often does the shell ask `robot.modules` after a typed line.
 MODULE_CHECK_PERIOD = 1.0
 MAX_WATCH_HZ = 50.0
+#: Slowest watch: one poll every 100 s. Slower rates meant waits no clock takes (`watch … 1e-10`
+#: was an OverflowError traceback from select, which ended the interactive shell too).
+MIN_WATCH_HZ = 0.01
 MAX_HOLD_S = 3600.0
 
 EXIT_OK, EXIT_ERROR, EXIT_CONNECTION = 0, 1, 2
@@ -86,17 +89,20 @@ def parse_requests(text: str) -> list[Request]:
     return list(parsed.requests)
 
 
-def split_trailing_number(rest: str, what: str, lo: float, hi: float
+def split_trailing_number(rest: str, what: str, lo: float, hi: float, *, lo_open: bool = True
                           ) -> tuple[str, float | None]:
-    """`base:base.get=() 5` -> (`base:base.get=()`, 5.0); the number is optional."""
+    """`base:base.get=() 5` -> (`base:base.get=()`, 5.0); the number is optional. It must be
+    above `lo` (at least `lo` when not `lo_open`) and at most `hi`."""
     parts = rest.rsplit(None, 1)
     if len(parts) == 2 and parts[0].rstrip().endswith(")"):
         try:
             value = float(parts[1])
         except ValueError:
             return rest.strip(), None
-        if not math.isfinite(value) or not lo < value <= hi:
-            raise UsageError(f"{what} must be in {lo:g} < {what} <= {hi:g}, not {parts[1]}")
+        above = lo < value if lo_open else lo <= value
+        if not math.isfinite(value) or not above or not value <= hi:
+            raise UsageError(f"{what} must be in {lo:g} {'<' if lo_open else '<='} {what} <= "
+                             f"{hi:g}, not {parts[1]}")
         return parts[0].strip(), value
     return rest.strip(), None
 
@@ -414,7 +420,7 @@ class Shell:
 
     def cmd_watch(self, rest: str) -> int:
         """Re-poll a read at HZ over the read-only connection until Ctrl-C."""
-        text, hz = split_trailing_number(rest, "HZ", 0.0, MAX_WATCH_HZ)
+        text, hz = split_trailing_number(rest, "HZ", MIN_WATCH_HZ, MAX_WATCH_HZ, lo_open=False)
         if not text:
             raise UsageError("usage: watch REQUEST [HZ]")
         requests = parse_requests(text)

@@ -335,11 +335,26 @@ def parse_profile(text: str, file: str, name: str) -> Profile:
     if "turbo" in keys:
         turbo = None if keys["turbo"].scalar() is None else keys["turbo"].index(
             BUTTON_COUNT, "a button")
+    if turbo == deadman:  # every motion would be at turbo_scale: holding the dead-man is turbo
+        where = keys["turbo"] if "turbo" in keys else keys["deadman"]
+        raise where.error(f"button {deadman} is both the dead-man and the turbo button; give "
+                          "turbo another button (or turbo: null)")
     bindings = tuple(_binding(n) for n in keys["bindings"].sequence())
+    reserved = {deadman: "dead-man"} | ({} if turbo is None else {turbo: "turbo"})
     for b, n in zip(bindings, keys["bindings"].sequence(), strict=True):
-        used = [b.press] if b.press is not None else []
-        if deadman in used or (turbo is not None and turbo in used):
+        if b.press in reserved:
             raise n.error(f"button {b.press} is already the dead-man or turbo button")
+        # an input on the dead-man moved whenever motion was enabled, one on turbo whenever
+        # turbo was held
+        bk = n.mapping(_BINDING_KEYS)
+        inputs = [(bk[k], i) for k, i in (("value", b.value), ("minus", b.minus)) if i]
+        if b.stick is not None:
+            sk = bk["stick"].mapping(("forward", "turn"))
+            inputs += [(sk["forward"], b.stick[0]), (sk["turn"], b.stick[1])]
+        for where, inp in inputs:
+            if inp.kind == "button" and inp.index in reserved:
+                raise where.error(
+                    f"button {inp.index} is already the {reserved[inp.index]} button")
     keyboard = Keyboard()
     if "keyboard" in keys:
         kn = keys["keyboard"]

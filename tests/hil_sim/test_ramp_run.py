@@ -36,6 +36,30 @@ def test_run_sim_serves_and_sigterm_stops_motors_and_exits_0() -> None:
     assert "transitions" not in err, err
 
 
+def test_the_ready_line_puts_an_ipv6_address_in_brackets() -> None:
+    """`ramp run --host ::1` said `ready on ::1:35857`, which no client takes back
+    (`ramp-shell ::1:35857`: an IPv6 address with a port goes in brackets)."""
+    if not socket.has_ipv6:  # pragma: no cover - every CI machine has ::1
+        pytest.skip("no IPv6")
+    proc = subprocess.Popen([sys.executable, "-m", "ramp.cli", "run", "--sim", "--host", "::1",
+                             "--port", "0"], cwd=REPO, text=True, stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL)
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        assert line.startswith("ramp: ready on [::1]:"), line
+        port = int(line.rsplit(":", 1)[1])
+        with socket.create_connection(("::1", port), timeout=5) as s:
+            assert ask(s, "robot:robot.modules=()") == "robot:robot.modules=(base,ble)"
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.communicate(timeout=10)
+        except subprocess.TimeoutExpired:  # pragma: no cover
+            proc.kill()
+            proc.communicate()
+
+
 def test_config_error_exits_2_and_names_file_line_key(tmp_path: Path) -> None:
     bad = tmp_path / "bad.yaml"
     bad.write_text("buses:\n  m: {driver: sabertooth, port: /dev/null, baud: 1234}\n")

@@ -256,6 +256,15 @@ def test_c_a_timeout_out_of_range_is_a_usage_error(timeout: str) -> None:
     assert "Traceback" not in proc.stderr
 
 
+@pytest.mark.parametrize("hz", ["1e-10", "0.001"])
+def test_c_watch_slower_than_one_poll_in_100_s_is_a_usage_error(server: str, hz: str) -> None:
+    """`watch … 1e-10` waited 1e10 s: an OverflowError traceback from select."""
+    proc = run_c(server, "-c", f"watch robot:robot.get=() {hz}")
+    assert proc.returncode == 1
+    assert f"HZ must be in 0.01 <= HZ <= 50, not {hz}" in proc.stdout + proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
 def test_c_connection_closed_by_peer_exits_2() -> None:
     listener = socket.create_server(("127.0.0.1", 0))
     port = listener.getsockname()[1]

@@ -160,6 +160,28 @@ def test_bad_backend_addresses_are_refused(text: str) -> None:
         parse_address(text)
 
 
+@pytest.mark.parametrize("host", ["", "ü☃", "a..b", "999.1.1.1", "10", "h:5", "-x", "x" * 300])
+def test_a_host_that_is_no_address_is_refused_at_its_line(host: str) -> None:
+    """`lidar: {host: ""}` connected to this computer, not to the scanner; a backend named
+    `ü☃:5577` failed only once the robot was on the field."""
+    (error,) = errors_of(f"lidar:\n  host: '{host}'\n")
+    assert error.startswith("a.yaml:2: lidar.host: ")
+    assert "is not an IP address or host name" in error and "192.168.0.10" in error
+    if host and ":" not in host:
+        (error,) = errors_of(f"backend: '{host}:5577'\n")
+        assert error.startswith("a.yaml:1: backend: ")
+        assert "is not an IP address or host name; expected HOST:PORT" in error
+
+
+def test_a_phidget_serial_past_32_bits_is_refused() -> None:
+    """Phidget22 cuts a serial to 32 bits: 4294967296 + N would match board N."""
+    found = errors_of("imu: {serial: 4295267297}\ngimbal: {serial: 2147483648}\n")
+    assert "a.yaml:1: imu.serial: 4295267297 is not a Phidget serial number or -1 for any " \
+        "(-1-2147483647)" in found
+    assert "a.yaml:2: gimbal.serial: 2147483648 is not a Phidget serial number or -1 for " \
+        "any (-1-2147483647)" in found
+
+
 def test_an_unreadable_file_is_one_error_naming_it(tmp_path: Path) -> None:
     cfg, errors = check_config(tmp_path / "nope.yaml")
     assert cfg is None and len(errors) == 1 and "nope.yaml: cannot read" in str(errors[0])
@@ -172,6 +194,55 @@ def test_check_prints_ok_for_the_example(capsys: pytest.CaptureFixture[str]) -> 
     assert main(["check", str(EXAMPLE)]) == 0
     out = capsys.readouterr().out
     assert out.startswith(f"{EXAMPLE}: ok") and "pan channel 0 -90..90 deg" in out
+
+
+def test_a_state_timeout_is_checked_with_the_file() -> None:
+    """`timeout_nosuch_s: 5` passed `ramp-autonomy check`; the state machine refused it only
+    when the mission was built (`ramp sim mission --config` ended in a traceback)."""
+    cfg, errors = parse_config("mission: {timeout_excavate_s: 240}\n")
+    assert errors == [] and cfg is not None and cfg.mission["timeout_excavate_s"] == 240
+    found = errors_of("mission:\n  timeout_nosuch_s: 5\n  timeout_stop_s: -1\n")
+    assert found[0].startswith("a.yaml:2: mission.timeout_nosuch_s: no state named 'nosuch' "
+                               "has a timeout (states: acquire_control, ")
+    assert found[1] == "a.yaml:3: mission.timeout_stop_s: -1 is not a time in s (> 0)"
+
+
+def test_check_notes_a_tunable_no_code_reads(tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """A misspelt tunable is accepted (a later mission may read more names), but it was
+    silently ignored: `drive_speed_pcnt: 20` left the robot at 60 %."""
+    path = tmp_path / "a.yaml"
+    path.write_text("mission: {drive_speed_pcnt: 20, duration_s: 300, zzz: 1, "
+                    "timeout_dock_s: 90}\n")
+    assert main(["check", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "  note: mission.drive_speed_pcnt is not a tunable this version reads (did you " \
+        "mean drive_speed_pct?); it is ignored\n" in out
+    assert "  note: mission.zzz is not a tunable this version reads; it is ignored" in out
+    assert "duration_s" not in out and "timeout_dock_s" not in out
+    assert main(["check", str(EXAMPLE)]) == 0
+    assert "note:" not in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("origin", ["*", "not a url", "https://app.foxglove.dev/studio",
+                                    "javascript:alert(1)", "", "http://h:99999"])
+def test_a_foxglove_origin_no_browser_sends_is_a_usage_error(
+        origin: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """`--foxglove-origin '*'` or a page's address with a path never matched any browser's
+    Origin: the page was refused while the operator thought it allowed."""
+    with pytest.raises(SystemExit) as exc:
+        main(["--backend", "127.0.0.1:1", "--foxglove-origin", origin])
+    assert exc.value.code == 2
+    assert "is not a web page's origin; expected http(s)://HOST[:PORT]" in \
+        capsys.readouterr().err
+
+
+def test_a_foxglove_origin_is_kept_as_a_browser_sends_it() -> None:
+    from ramp.autonomy.cli import build_parser
+
+    args = build_parser().parse_args(["--foxglove-origin", "https://App.Foxglove.dev/",
+                                      "--foxglove-origin", "http://[::1]:8080"])
+    assert args.foxglove_origin == ["https://app.foxglove.dev", "http://[::1]:8080"]
 
 
 def test_check_lists_every_error_and_fails(tmp_path: Path,

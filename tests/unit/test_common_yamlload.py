@@ -30,6 +30,8 @@ from ramp.common.yamlload import (
 from ramp.config import check_config as check_ramp
 from ramp.teleop.profile import ProfileError, ProfileLibrary
 
+REPO = Path(__file__).resolve().parents[2]
+
 BOMB = "\n".join(["a0: &a0 [" + ", ".join(["lol"] * 9) + "]"] + [
     f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 9) + "]" for i in range(1, 9)]) + "\n"
 
@@ -133,6 +135,28 @@ def test_a_value_python_cannot_build_is_a_yaml_error_at_its_line() -> None:
         parse("a: 1\nb: " + "9" * 100_000 + "\n")
     assert info.value.line == 2 and "cannot read this value" in info.value.problem
     assert len(str(info.value)) < 300
+
+
+def test_numbers_with_an_exponent_are_numbers_as_in_yaml_1_2(tmp_path: Path) -> None:
+    """PyYAML (YAML 1.1) read `5e-1` as text, and `ramp check` then said
+    `watchdog.timeout: '5e-1' is not a timeout in seconds (0.05-60)`."""
+    assert parse("a: [5e-1, 6E2, 1.0e308, -1e+3, .5e1, 1e, e5, 5e-1x]\n")["a"] == [
+        0.5, 600.0, 1e308, -1000.0, 5.0, "1e", "e5", "5e-1x"]
+    config = tmp_path / "ramp.yaml"
+    text = (REPO / "ramp.yaml").read_text().replace("watchdog: {timeout: 1.0}",
+                                                    "watchdog: {timeout: 5e-1}")
+    config.write_text(text)
+    ramp, errors = check_ramp(config)
+    assert errors == [] and ramp is not None and ramp.watchdog_timeout == 0.5
+
+
+@pytest.mark.parametrize("name", ["", " "])
+def test_an_empty_file_name_says_so(name: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """`ramp check ""` and `--config ""` said only `cannot read: no such file`."""
+    with pytest.raises(YamlError, match="cannot read: the file name is empty"):
+        read_text(name)
+    cfg, errors = check_ramp(name)
+    assert cfg is None and [e.detail for e in errors] == ["cannot read: the file name is empty"]
 
 
 def test_compose_has_the_same_limits() -> None:

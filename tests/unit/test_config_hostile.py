@@ -59,6 +59,17 @@ HOSTILE = {
     "no modules": ("buses:\n  io: {driver: sim}\n", "ramp.yaml:1: modules: no modules"),
     "a list where a bus name goes": (GOOD.replace("lamp: {bus: io}", "lamp: {bus: [io]}"),
                                      "ramp.yaml:5: modules.demo.lamp.bus: ['io'] is not a bus"),
+    # Checked now, not retried once a second for ever by a bus that can never open.
+    "an empty serial port": (GOOD.replace("{driver: sim}", "{driver: sim}\n  st: {driver: "
+                                          "sabertooth, port: ''}"),
+                             "ramp.yaml:4: buses.st.port: '' is not a serial device path"),
+    "a blank CAN channel": (GOOD.replace("{driver: sim}", "{driver: sim}\n  c: {driver: can, "
+                                         "channel: ' '}"),
+                            "ramp.yaml:4: buses.c.channel: ' ' is not a CAN channel"),
+    "an unknown python-can interface": (
+        GOOD.replace("{driver: sim}", "{driver: sim}\n  c: {driver: can, interface: nope, "
+                     "channel: can0}"),
+        "ramp.yaml:4: buses.c.interface: 'nope' is not a python-can interface name (one of "),
 }
 
 

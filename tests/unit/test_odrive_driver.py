@@ -319,9 +319,11 @@ def test_open_failure_names_the_bus() -> None:
     with pytest.raises(DeviceError, match="bus ble_can: cannot open CAN socketcan:ramp-no-such-if"):
         bad.open(0.0)
     assert not bad.is_open
-    unknown = ODriveBus("ble_can", {"interface": "no-such-interface", "channel": "x"})
-    with pytest.raises(DeviceError, match="bus ble_can"):
-        unknown.open(0.0)
+    # An interface python-can does not know can never open: a config error, not a bus that
+    # retries "Unknown interface type" once a second for ever.
+    with pytest.raises(ConfigError, match=r"buses\.ble_can\.interface: 'no-such-interface' is "
+                                          r"not a python-can interface name \(one of "):
+        ODriveBus("ble_can", {"interface": "no-such-interface", "channel": "x"})
 
 
 # -- odds and ends --------------------------------------------------------------------------------

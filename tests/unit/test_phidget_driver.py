@@ -85,6 +85,20 @@ def test_fields_defaults_and_ranges() -> None:
         PhidgetBus("io", {"data_interval": 0.0})
 
 
+@pytest.mark.parametrize(("key", "value", "says"), [
+    ("serial", 2**32 + 300001, r"buses\.io\.serial: 4295267297 is not a Phidget serial "
+     r"number or -1 for any \(-1-2147483647\)"),
+    ("serial", 10**30, r"buses\.io\.serial: 1000000000000000000000000000000 is not"),
+    ("hub_port", 6, r"buses\.io\.hub_port: 6 is not a VINT hub port or -1 for any \(-1-5\)"),
+])
+def test_serial_and_hub_port_are_bounded_as_phidget22_takes_them(key: str, value: int,
+                                                                 says: str) -> None:
+    """A serial past 32 bits was cut by ctypes and matched another board, and `hub_port: 99`
+    waited for a port no hub has; autonomy.yaml already stopped at port 5."""
+    with pytest.raises(ConfigError, match=says):
+        PhidgetBus("io", {key: value})
+
+
 def test_bad_channel_specs_are_rejected() -> None:
     bus = PhidgetBus("io", {}, api=FakeBoard().api)
     with pytest.raises(ValueError, match="8 is not an analog input"):

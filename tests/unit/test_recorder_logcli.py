@@ -167,6 +167,16 @@ def test_missing_and_foreign_files_are_refused_with_status_2(
     assert "not an MCAP file" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("command", ["summary", "plot"])
+def test_an_empty_file_name_is_a_usage_error(command: str,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """`ramp log summary ""` said `.: cannot read: it is a directory`."""
+    with pytest.raises(SystemExit) as exc:
+        main([command, "", "-o", "x.png"] if command == "plot" else [command, ""])
+    assert exc.value.code == 2
+    assert "expected a recording (FILE.mcap), got an empty name" in capsys.readouterr().err
+
+
 def test_plot_without_matplotlib_says_what_to_install(
         recording: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:

@@ -93,6 +93,26 @@ def test_an_empty_record_dir_is_a_usage_error(capsys: pytest.CaptureFixture[str]
     assert "--record: expected a directory" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("where", ["/dev/null", "{tmp}/file", "{tmp}/file/below"])
+def test_a_record_dir_that_cannot_be_a_directory_is_a_usage_error(
+        where: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`--record /dev/null` ran the supervisor recording nothing, with a warning every 5 s."""
+    (tmp_path / "file").write_text("")
+    path = where.format(tmp=tmp_path)
+    with pytest.raises(SystemExit) as exc:
+        ramp_main(["run", "--record", path, "--sim"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert f"--record: cannot record into {path}: " in err and "Traceback" not in err
+
+
+def test_a_missing_record_dir_is_made_as_the_command_line_is_read(tmp_path: Path) -> None:
+    from ramp.cli import build_parser
+
+    args = build_parser().parse_args(["run", "--record", str(tmp_path / "a" / "b"), "--sim"])
+    assert args.record == str(tmp_path / "a" / "b") and (tmp_path / "a" / "b").is_dir()
+
+
 # -- the running supervisor -------------------------------------------------------------------
 class GatedFile(io.BytesIO):
     """A disk that blocks every write while its gate is shut."""

@@ -258,6 +258,10 @@ def test_trailing_number_of_watch_and_hold() -> None:
         split_trailing_number("base:base.get=() 500", "HZ", 0, 50)
     with pytest.raises(UsageError):
         split_trailing_number("base:base.get=() nan", "HZ", 0, 50)
+    assert split_trailing_number("a:b.get=() 0.01", "HZ", 0.01, 50, lo_open=False) == (
+        "a:b.get=()", 0.01)
+    with pytest.raises(UsageError, match="HZ must be in 0.01 <= HZ <= 50, not 1e-10"):
+        split_trailing_number("a:b.get=() 1e-10", "HZ", 0.01, 50, lo_open=False)
 
 
 def test_parse_requests_reports_syntax_in_the_parsers_words() -> None:

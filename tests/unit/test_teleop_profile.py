@@ -64,6 +64,16 @@ def test_keyboard_can_be_switched_off() -> None:
     ("deadman: 40\n" + MINIMAL, "mine.yaml:1: deadman", "40 is not a button (0-16"),
     (MINIMAL + "  - {request: ble:lift.extend, press: 4}\n", "mine.yaml:4: bindings.1",
      "already the dead-man"),
+    # The dead-man and turbo buttons drive nothing else: holding the dead-man was turbo, and
+    # a value on it ran the chain whenever motion was enabled.
+    ("deadman: 5\n" + MINIMAL, "mine.yaml:1: deadman", "both the dead-man and the turbo"),
+    ("deadman: 3\nturbo: 3\n" + MINIMAL, "mine.yaml:2: turbo", "turbo: null"),
+    (MINIMAL + "  - {request: ble:chain.vel, value: {button: 4}}\n",
+     "mine.yaml:4: bindings.1.value", "button 4 is already the dead-man button"),
+    (MINIMAL + "  - {request: ble:chain.vel, value: {button: 7}, minus: {button: 5}}\n",
+     "mine.yaml:4: bindings.1.minus", "button 5 is already the turbo button"),
+    (MINIMAL.replace("turn: {axis: 0}", "turn: {button: 4}"),
+     "mine.yaml:3: bindings.0.stick.turn", "already the dead-man button"),
     (MINIMAL + "  - {request: ble:chain.vel, value: {button: 7}, params: [1]}\n",
      "mine.yaml:4: bindings.1.params", "params go with press"),
     (MINIMAL + "  - {request: ble:chain.vel}\n", "mine.yaml:4: bindings.1",

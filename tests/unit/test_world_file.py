@@ -76,6 +76,13 @@ def test_any_layout_inside_the_arena_is_accepted() -> None:
      "w.yaml:3: rocks[1].d: expected a diameter in metres > 0, got -0.2"),
     ("craters:\n  - x: 3.0\n    y: 1.0\n    d: 0.3\n    depth: 0\n",
      "w.yaml:5: craters[0].depth: expected a depth in metres > 0, got 0"),
+    # Sizes the ray caster cannot take (an overflow, then NaN ranges and no obstacle found).
+    ("craters:\n  - {x: 3, y: 1, d: 1.0e-300, depth: 0.2}\n",
+     "w.yaml:2: craters[0].d: expected a diameter of 0.01 m or more, got 1e-300"),
+    ("craters:\n  - {x: 3, y: 1, d: 0.3, depth: 1.0e+308}\n",
+     "w.yaml:2: craters[0].depth: expected at most 10 m, got 1e+308"),
+    ("rocks:\n  - {x: 3, y: 1, d: 0.3}\n  - {x: 2, y: 1, d: 0.3,\n     height: 11}\n",
+     "w.yaml:4: rocks[1].height: expected at most 10 m, got 11"),
     ("craters:\n  - {x: 3, y: 1, d: 0.3, deep: 0.2}\n",
      "w.yaml:2: craters[0].deep: unknown key (expected one of: x, y, d, depth)"),
     ("start: {box: middle, heading: 90}\n", "w.yaml:1: start.box: expected left or right"),
