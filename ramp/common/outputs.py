@@ -79,3 +79,17 @@ def output_file(text: str) -> str:
     except OutputError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
     return text
+
+
+def figure_path(text: str) -> str:
+    """A picture's file name as written: `.png` added to a name without a suffix, so
+    `--plot scan` (or a directory's name) writes `scan.png` and the command says so."""
+    return text if Path(text).suffix else text + ".png"
+
+
+def figure_file(text: str) -> str:
+    """argparse `type=` for an option naming a picture to write: `figure_path`, checked as
+    `output_file` checks it."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a file name")
+    return output_file(figure_path(text))

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ramp.common.outputs import output_file
+from ramp.common.outputs import figure_file
 
 
 def _recording(text: str) -> Path:
@@ -48,7 +48,7 @@ def add_log_parser(sub: Any) -> argparse.ArgumentParser:
 
 def _output_path(text: str) -> Path:
     """`-o FILE.png`, checked before the recordings are read."""
-    return Path(output_file(text))
+    return Path(figure_file(text))
 
 
 def _progress_flags(p: argparse.ArgumentParser) -> None:

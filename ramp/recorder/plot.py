@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ramp.common.outputs import save_figure
+from ramp.common.outputs import figure_path, save_figure
 from ramp.recorder.reading import Msg
 from ramp.recorder.schemas import (
     TOPIC_COMMANDS,
@@ -134,7 +134,7 @@ def _binary(series: Series) -> bool:
 def output_path(out: Path) -> Path:
     """The file `plot` really writes: matplotlib adds `.png` to a name without a suffix (`-o
     DIR` writes `DIR.png`), so the caller is told that name, not the one it gave."""
-    return out if out.suffix else out.with_name(out.name + ".png")
+    return Path(figure_path(str(out)))
 
 
 def plot(data: PlotData, out: Path, title: str = "") -> Path:

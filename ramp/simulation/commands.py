@@ -31,7 +31,7 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-from ramp.common.outputs import output_file
+from ramp.common.outputs import figure_file
 from ramp.simulation.arguments import MAX_YAW_DEG, ArgumentError, check_seed, check_yaw
 
 
@@ -61,7 +61,7 @@ def add_lidar_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
                    help="take the scan through the real path: the Hokuyo emulator serving "
                         "SCIP 2.0 on loopback TCP to the autonomy's LIDAR driver (needs the "
                         "autonomy package); the ranges are the same")
-    p.add_argument("--plot", type=output_file, metavar="FILE.png",
+    p.add_argument("--plot", type=figure_file, metavar="FILE.png",
                    help="draw the scan over the arena map")
     p.add_argument("--json", action="store_true",
                    help="print one JSON object (the pose, the counts, every range in mm)")
@@ -106,7 +106,7 @@ def add_perceive_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]
                    help="IMU fault to inject (SPEC 6.2; default none)")
     p.add_argument("--config", metavar="FILE",
                    help="the autonomy's config (default: the repository's autonomy.yaml)")
-    p.add_argument("--plot", type=output_file, metavar="FILE.png",
+    p.add_argument("--plot", type=figure_file, metavar="FILE.png",
                    help="draw the localization and the obstacle map")
     p.add_argument("--json", action="store_true",
                    help="print one JSON object: pose (or null when lost), lost, obstacles, "

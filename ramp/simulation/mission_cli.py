@@ -26,7 +26,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ramp.common.outputs import output_file
+from ramp.common.outputs import figure_file, output_file
 
 HEADINGS = (0, 90, 180, 270)
 REALTIME_PORT = 5577  # `ramp run`'s port: what ramp-shell and ramp-teleop try first
@@ -66,7 +66,7 @@ def add_mission_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser])
     p.add_argument("--trace", type=output_file, metavar="FILE",
                    help="write the ground truth as JSON lines: a header with the true world, "
                         "then t, x, y, yaw, lift, bin_kg, delivered_kg, state every 0.1 s")
-    p.add_argument("--plot", type=output_file, metavar="FILE.png",
+    p.add_argument("--plot", type=figure_file, metavar="FILE.png",
                    help="draw the arena, true and detected obstacles, planned and driven "
                         "paths")
     p.add_argument("--record", type=output_file, metavar="FILE.mcap",

@@ -3,13 +3,14 @@ and a picture lands exactly where the command says it does."""
 
 from __future__ import annotations
 
+import argparse
 import os
 from pathlib import Path
 
 import pytest
 
 from ramp import cli
-from ramp.common.outputs import OutputError, check_output, save_figure
+from ramp.common.outputs import OutputError, check_output, figure_file, save_figure
 from ramp.recorder.logcli import main as log_main
 
 
@@ -102,3 +103,13 @@ def test_log_plot_refuses_an_unwritable_picture_before_reading(
         log_main(["plot", str(tmp_path / "missing.mcap"), "-o", str(bad)])
     assert info.value.code == 2
     assert f"cannot write {bad}" in capsys.readouterr().err
+
+
+def test_a_picture_named_without_a_suffix_is_written_as_png_and_named_so(
+        tmp_path: Path) -> None:
+    (tmp_path / "plots").mkdir()
+    assert figure_file(str(tmp_path / "scan")) == str(tmp_path / "scan.png")
+    assert figure_file(str(tmp_path / "plots")) == str(tmp_path / "plots.png")  # not the dir
+    assert figure_file(str(tmp_path / "scan.svg")) == str(tmp_path / "scan.svg")
+    with pytest.raises(argparse.ArgumentTypeError, match="expected a file name"):
+        figure_file("")

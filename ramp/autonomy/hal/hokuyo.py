@@ -55,7 +55,7 @@ from ramp.autonomy.hal.lidar import (
 from ramp.clock import Clock, MonotonicClock
 from ramp.common import tcpclient
 from ramp.common.hostport import parse_hostport
-from ramp.common.outputs import output_file, save_figure
+from ramp.common.outputs import figure_file, save_figure
 from ramp.common.tcpclient import IoLoop, TcpClient, check_seconds
 from ramp.scheduler import Scheduler
 
@@ -532,7 +532,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="also stream N scans (MD) and report their rate")
     parser.add_argument("--model", default="UTM-30LX",
                         help="model PP must report (prefix; '' accepts any)")
-    parser.add_argument("--plot", type=output_file, metavar="FILE.png",
+    parser.add_argument("--plot", type=figure_file, metavar="FILE.png",
                         help="draw the scan seen from above (needs matplotlib: ramp[plot])")
     args = parser.parse_args(argv)
     if not (math.isfinite(args.timeout) and 0 < args.timeout <= 3600):

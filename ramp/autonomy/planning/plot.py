@@ -23,7 +23,7 @@ from ramp.autonomy.planning.docking import plan_to_dock
 from ramp.autonomy.planning.geometry import ArenaMap, Pose
 from ramp.autonomy.planning.path import Path, end_yaw, swept_poses
 from ramp.autonomy.planning.planner import Planner
-from ramp.common.outputs import output_file, save_figure
+from ramp.common.outputs import figure_file, save_figure
 
 # SPEC 6.1's world-file example.
 EXAMPLE_ROCKS = ({"x": 2.10, "y": 0.90, "d": 0.25}, {"x": 3.30, "y": 2.60, "d": 0.12},
@@ -117,7 +117,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m ramp.autonomy.planning.plot",
                                      description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("-o", "--out", type=output_file, default="planning.png",
+    parser.add_argument("-o", "--out", type=figure_file, default="planning.png",
                         help="PNG file to write")
     args = parser.parse_args(argv)
     return example(args.out)
