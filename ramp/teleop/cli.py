@@ -41,13 +41,17 @@ def _battery(text: str) -> tuple[float, float]:
     return empty, full
 
 
+MIN_POLL_HZ = 0.1  # one poll in 10 s: the slowest status the console still calls live
+
+
 def _rate(text: str) -> float:
     try:
         hz = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not 0 < hz <= 100:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected 0 < HZ <= 100")
+    # Below 0.1 Hz (1e-300 was accepted) the page's status would go stale without a word.
+    if not MIN_POLL_HZ <= hz <= 100:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {MIN_POLL_HZ:g} <= HZ <= 100")
     return hz
 
 

@@ -70,6 +70,15 @@ def test_a_bad_backend_address_is_a_usage_error(capsys: pytest.CaptureFixture[st
         main(["--name", "none"])
 
 
+@pytest.mark.parametrize("hz", ["1e-300", "0.05", "0", "nan", "101"])
+def test_a_poll_rate_out_of_range_is_a_usage_error(capsys: pytest.CaptureFixture[str],
+                                                   hz: str) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(["--poll-hz", hz])
+    assert info.value.code == 2
+    assert "expected 0.1 <= HZ <= 100" in capsys.readouterr().err
+
+
 def test_the_console_never_imports_the_backend() -> None:
     code = (
         "import sys, ramp.teleop.cli, ramp.teleop.app, ramp.teleop.console\n"
