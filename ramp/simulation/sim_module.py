@@ -29,6 +29,10 @@ if TYPE_CHECKING:
     from ramp.simulation.backplane import SimBackplane
 
 NAME = "sim"
+#: The largest magnitude `sim:input.set` takes: wider than any real board's raw range (a
+#: bridge input reads up to 1000 mV/V); 1e308 was taken, and `get` then answered with a number
+#: of three hundred digits.
+MAX_INPUT = 1000.0
 #: HAL kinds `sim:input.set` accepts (the inputs a module reads).
 INPUT_KINDS = ("digital_in", "analog_in", "bridge_in")
 #: Largest IMU mount rotation `sim:imu.shift` accepts (deg).
@@ -61,7 +65,8 @@ class SimModule(Module):
                           "the bus's device vanishes (hot plug)"))
         self.add(Function("bus", "plug", (name,), self._plug, "state",
                           "the bus's device comes back"))
-        self.add(Function("input", "set", (name, name, FloatParam()), self._input_set, "state",
+        self.add(Function("input", "set", (name, name, FloatParam(-MAX_INPUT, MAX_INPUT)),
+                          self._input_set, "state",
                           "an input reads VALUE until cleared (module, device, value)"))
         self.add(Function("input", "clear", (name, name), self._input_clear, "state",
                           "the input reads the simulated world again (module, device)"))

@@ -32,7 +32,7 @@ def test_describe_lists_every_request_as_kind_state(h: SimHarness) -> None:
     c = h.connect()
     d = c.ask("sim:sim.describe=()")
     for fn in ("lift.function=(jam,int 0..1)", "bus.function=(unplug,name)",
-               "bus.function=(plug,name)", "input.function=(set,name,name,float)",
+               "bus.function=(plug,name)", "input.function=(set,name,name,float -1000..1000)",
                "input.function=(clear,name,name)"):
         assert f"sim:{fn}" in d
     for dev, fn in (("lift", "jam"), ("bus", "unplug"), ("bus", "plug"), ("input", "set"),
@@ -124,6 +124,7 @@ def test_input_set_on_the_lift_pot_is_a_position(h: SimHarness) -> None:
     ("sim:input.set=(base,l_button,0.5)", "base:l_button is a digital input"),
     ("sim:input.clear=(ble,lift_motor)", "ble:lift_motor is a motor not an input"),
     ("sim:input.set=(base,battery,nan)", "set takes three parameters"),
+    ("sim:input.set=(base,battery,1e308)", "set takes three parameters"),
     ("sim:lift.jam=(2)", "jam takes one int in 0..1"),
 ])
 def test_bad_arguments_are_bad_params_and_change_nothing(h: SimHarness, request_: str,
