@@ -214,6 +214,7 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
     _check_host(c, root, server)
     wd = c.block(root, "watchdog", "watchdog", WATCHDOG_FIELDS)
     sched = c.block(root, "scheduler", "scheduler", SCHEDULER_FIELDS)
+    _check_watchdog_tick(c, root, wd["timeout"], sched["rate_hz"])
     recorder = _recorder(c, root, name)
     buses, bus_classes = _buses(c, root)
     modules_errors = len(c.errors)
@@ -235,6 +236,21 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
         interlocks=interlocks,
     )
     return cfg, []
+
+
+def _check_watchdog_tick(c: _Checker, root: LinedMap, timeout: float, rate_hz: float) -> None:
+    """The watchdog is looked at once a tick: a timeout shorter than a tick (0.05 s at 1 Hz
+    was accepted) would be noticed only up to a tick late, past what the file promises."""
+    if not (isinstance(timeout, float | int) and isinstance(rate_hz, float | int)):
+        return
+    tick = 1.0 / rate_hz
+    if timeout < tick:
+        wd = root.get("watchdog")
+        line = wd.lines.get("timeout", wd.line) if isinstance(wd, LinedMap) else 1
+        c.err("watchdog.timeout", line,
+              f"{timeout:g} s is shorter than one tick ({tick:g} s at scheduler.rate_hz "
+              f"{rate_hz:g}): the watchdog is checked once a tick; raise the rate or the "
+              "timeout")
 
 
 def _report_bad_keys(c: _Checker, root: LinedMap) -> None:

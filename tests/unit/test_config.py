@@ -124,3 +124,12 @@ def test_two_buses_on_one_serial_port_are_a_config_error() -> None:
     assert len(errs) == 1, errs
     assert errs[0].startswith(f"ramp.yaml:{line}: buses.") and ".port: " in errs[0]
     assert "is already the port of bus" in errs[0]
+
+
+def test_a_watchdog_shorter_than_a_tick_is_an_error_at_its_line() -> None:
+    text = "scheduler: {rate_hz: 1}\nwatchdog:\n  timeout: 0.05\nmodules: {}\nbuses: {}\n"
+    cfg, errors = parse_config(text, "w.yaml")
+    assert cfg is None and len(errors) == 1
+    assert str(errors[0]).startswith("w.yaml:3: watchdog.timeout: 0.05 s is shorter than one "
+                                     "tick (1 s at scheduler.rate_hz 1)")
+    assert parse_config(text.replace("rate_hz: 1}", "rate_hz: 20}"), "w.yaml")[1] == []
