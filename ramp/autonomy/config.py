@@ -24,6 +24,7 @@ from typing import Any
 from ramp.autonomy.hal import DRIVERS
 from ramp.autonomy.mount import Mount
 from ramp.common.hostport import format_hostport, parse_hostport, valid_host
+from ramp.common.phidget22 import MAX_HUB_PORT, MAX_SERIAL
 from ramp.common.yamlload import LinedMap, YamlError, kind_of, parse_mapping, read_text
 from ramp.errors import ConfigError, ConfigErrors
 from ramp.schema import Field, shorten
@@ -51,8 +52,8 @@ LIDAR_FIELDS = {
     "port": Field(int, DEFAULT_LIDAR_PORT, lo=1, hi=65535, what="a TCP port"),
 }
 
-_SERIAL = Field(int, -1, lo=-1, hi=2**31 - 1, what="a Phidget serial number or -1 for any")
-_HUB_PORT = Field(int, -1, lo=-1, hi=5, what="a VINT hub port or -1 for any")
+_SERIAL = Field(int, -1, lo=-1, hi=MAX_SERIAL, what="a Phidget serial number or -1 for any")
+_HUB_PORT = Field(int, -1, lo=-1, hi=MAX_HUB_PORT, what="a VINT hub port or -1 for any")
 _ATTACH = Field(float, 2.0, lo=0.05, hi=60.0, what="a time in s")
 
 IMU_FIELDS = {
@@ -197,13 +198,17 @@ def tunable_notes(cfg: AutonomyConfig) -> list[str]:
     misspelt `drive_speed_pcnt: 20` left the robot at the default 60 % without a word."""
     notes = []
     for name in cfg.mission:
-        if name not in MISSION_FIELDS and not (name.startswith("timeout_")
-                                               and name.endswith("_s")):
+        if name not in MISSION_FIELDS and not _state_timeout(name):
             near = difflib.get_close_matches(name, MISSION_FIELDS, n=1)
             hint = f" (did you mean {near[0]}?)" if near else ""
             notes.append(f"mission.{name} is not a tunable this version reads{hint}; "
                          "it is ignored")
     return notes
+
+
+def _state_timeout(name: str) -> bool:
+    """`timeout_<state>_s`: a state's timeout, which the state machine checks and reads."""
+    return name.startswith("timeout_") and name.endswith("_s")
 
 
 def parse_address(text: str) -> tuple[str, int]:
@@ -422,7 +427,7 @@ def _mission(c: _Checker, root: LinedMap) -> dict[str, float]:
         except ValueError as exc:
             c.err(path, line, str(exc))
             continue
-        if k.startswith("timeout_") and k.endswith("_s"):
+        if _state_timeout(k):
             # the state machine's own check, here rather than when the mission is built
             # (`timeout_nosuch_s: 5` passed the check and `ramp sim mission` ended in a
             # traceback)

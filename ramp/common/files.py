@@ -14,8 +14,8 @@ import stat
 from pathlib import Path
 
 
-class NotRegularFile(OSError):
-    """The path cannot be read as a regular file; str() is the reason in words."""
+class FileProblem(OSError):
+    """A path that cannot be used as asked; str() is the reason in words."""
 
     def __init__(self, reason: str) -> None:
         super().__init__(reason)
@@ -23,6 +23,10 @@ class NotRegularFile(OSError):
 
     def __str__(self) -> str:
         return self.reason
+
+
+class NotRegularFile(FileProblem):
+    """The path cannot be read as a regular file."""
 
 
 def open_regular(path: str | Path) -> tuple[int, int]:

@@ -15,18 +15,11 @@ import stat
 from pathlib import Path
 from typing import Any
 
-from ramp.common.files import kind
+from ramp.common.files import FileProblem, kind
 
 
-class OutputError(OSError):
-    """The path cannot be written; str() is the reason in words."""
-
-    def __init__(self, reason: str) -> None:
-        super().__init__(reason)
-        self.reason = reason
-
-    def __str__(self) -> str:
-        return self.reason
+class OutputError(FileProblem):
+    """The path cannot be written."""
 
 
 def check_output(path: str | Path) -> Path:

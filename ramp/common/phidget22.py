@@ -27,6 +27,12 @@ INSTALL_HINT = "install it with: pip install 'ramp[phidget]' and apt-get install
 #: libphidget22's "unknown double" (PUNK_DBL): a reading the board does not have.
 PUNK_DBL = 1e300
 
+#: The largest serial number and VINT hub port Phidget22 takes: it keeps both in a C int (a
+#: larger serial was cut to 32 bits by ctypes and matched another board), and a hub has
+#: ports 0-5.
+MAX_SERIAL = 2**31 - 1
+MAX_HUB_PORT = 5
+
 #: Seconds between retries of a command the library refused.
 RETRY_S = 0.1
 

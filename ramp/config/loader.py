@@ -241,8 +241,6 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
 def _check_watchdog_tick(c: _Checker, root: LinedMap, timeout: float, rate_hz: float) -> None:
     """The watchdog is looked at once a tick: a timeout shorter than a tick (0.05 s at 1 Hz
     was accepted) would be noticed only up to a tick late, past what the file promises."""
-    if not (isinstance(timeout, float | int) and isinstance(rate_hz, float | int)):
-        return
     tick = 1.0 / rate_hz
     if timeout < tick:
         wd = root.get("watchdog")

@@ -200,11 +200,10 @@ class PhidgetBus(Bus):
 
     driver_name = "phidget"
     fields: ClassVar[dict[str, Field]] = {
-        # Phidget22 keeps both in a C int: a larger serial was cut to 32 bits by ctypes and
-        # matched another board. A VINT hub has ports 0-5 (autonomy.yaml says the same).
-        "serial": Field(int, -1, lo=-1, hi=2**31 - 1,
+        "serial": Field(int, -1, lo=-1, hi=pc.MAX_SERIAL,
                         what="a Phidget serial number or -1 for any"),
-        "hub_port": Field(int, -1, lo=-1, hi=5, what="a VINT hub port or -1 for any"),
+        "hub_port": Field(int, -1, lo=-1, hi=pc.MAX_HUB_PORT,
+                          what="a VINT hub port or -1 for any"),
         "label": Field(str, ""),
         "data_interval": Field(float, 0.02, lo=0.001, hi=60.0, what="a sample interval in s"),
         "attach_timeout": Field(float, 2.0, lo=0.05, hi=60.0, what="a time in s"),

@@ -131,16 +131,10 @@ def _binary(series: Series) -> bool:
     return all(set(ys) <= {0.0, 1.0} for _, ys in series.values())
 
 
-def output_path(out: Path) -> Path:
-    """The file `plot` really writes: matplotlib adds `.png` to a name without a suffix (`-o
-    DIR` writes `DIR.png`), so the caller is told that name, not the one it gave."""
-    return Path(figure_path(str(out)))
-
-
 def plot(data: PlotData, out: Path, title: str = "") -> Path:
     """Draw the panels into `out` (PNG, or any format matplotlib knows by the suffix; `.png`
     added when there is none); returns the path written."""
-    out = output_path(out)
+    out = Path(figure_path(str(out)))
     import matplotlib
 
     matplotlib.use("Agg")
