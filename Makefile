@@ -1,6 +1,12 @@
 # The two commands a newcomer runs: `make run` (simulated MARTE) and `make test`.
 # Both create .venv from pyproject.toml on first use.
-PYTHON ?= python3
+# The interpreter .venv is made from: the system's Python 3 (/usr/bin/python3) when it is 3.11+
+# and can make a venv and compile extensions, else the first python3 on PATH. Debian builds its
+# Python with profile-guided and link-time optimization; a default pyenv build of the same
+# version ran a simulated mission 13 % slower, with the same results (docs/developing/
+# benchmarks-mission.md). `make PYTHON=python3.12 ...` chooses another.
+SYSTEM_PYTHON := $(shell /usr/bin/python3 scripts/pick_python.py 2>/dev/null)
+PYTHON ?= $(or $(SYSTEM_PYTHON),python3)
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
