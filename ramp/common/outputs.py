@@ -10,6 +10,7 @@ in words. `save_figure` then writes exactly the path asked for: matplotlib alone
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import stat
 from pathlib import Path
@@ -86,3 +87,14 @@ def figure_file(text: str) -> str:
     if not text.strip():
         raise argparse.ArgumentTypeError("expected a file name")
     return output_file(figure_path(text))
+
+
+PLOT_NEEDS_MATPLOTLIB = "--plot needs matplotlib: pip install 'ramp[plot]'"
+
+
+def plot_unavailable(plot: str | None) -> str | None:
+    """What to say, before any work, about a `--plot` that could not be drawn (matplotlib is
+    an optional extra); None when there is no picture asked for or it can be drawn."""
+    if plot and importlib.util.find_spec("matplotlib") is None:
+        return PLOT_NEEDS_MATPLOTLIB
+    return None

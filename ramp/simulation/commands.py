@@ -31,12 +31,19 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-from ramp.common.outputs import figure_file
+from ramp.common.outputs import figure_file, plot_unavailable
 from ramp.simulation.arguments import MAX_YAW_DEG, ArgumentError, check_seed, check_yaw
 
 
 class UsageError(Exception):
     """A bad argument, reported as `ramp sim: OPTION: what was expected` with exit 2."""
+
+
+def _check_plot(plot: str | None) -> None:
+    """A picture that could not be drawn is refused before the work, not after it."""
+    problem = plot_unavailable(plot)
+    if problem is not None:
+        raise UsageError(problem)
 
 
 def add_lidar_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -163,6 +170,7 @@ def cmd_lidar(args: argparse.Namespace) -> int:
 
 
 def _lidar(args: argparse.Namespace) -> int:
+    _check_plot(args.plot)
     from firmware_like.arena import random_layout, rule_problems
     from firmware_like.arena_params import HIT_NAMES
     from firmware_like.lidar_view import LidarView
@@ -296,6 +304,8 @@ def cmd_perceive(args: argparse.Namespace) -> int:
 
 def _perceive(args: argparse.Namespace) -> int:
     import logging
+
+    _check_plot(args.plot)
 
     from firmware_like.arena import random_layout
     from firmware_like.marte import MarteWorld

@@ -17,7 +17,6 @@ when the run did not qualify, 2 on a usage, world-file or config error.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import logging
 import os
@@ -26,7 +25,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ramp.common.outputs import figure_file, output_file
+from ramp.common.outputs import figure_file, output_file, plot_unavailable
 
 HEADINGS = (0, 90, 180, 270)
 REALTIME_PORT = 5577  # `ramp run`'s port: what ramp-shell and ramp-teleop try first
@@ -134,8 +133,9 @@ def _mission(args: argparse.Namespace) -> int:
                              single_loop=args.single_loop,
                              port=(REALTIME_PORT if args.port is None else args.port)
                              if args.realtime else 0)
-    if args.plot and importlib.util.find_spec("matplotlib") is None:
-        raise UsageError("--plot needs matplotlib: pip install 'ramp[plot]'")
+    no_plot = plot_unavailable(args.plot)
+    if no_plot is not None:
+        raise UsageError(no_plot)
     logging.basicConfig(level=logging.ERROR, format="%(levelname)s %(name)s: %(message)s")
     try:
         trace = open(args.trace, "w", encoding="utf-8") if args.trace else None  # noqa: SIM115

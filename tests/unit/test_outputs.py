@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from ramp import cli
+from ramp.common import outputs
 from ramp.common.outputs import OutputError, check_output, figure_file, save_figure
 from ramp.recorder.logcli import main as log_main
 
@@ -113,3 +114,27 @@ def test_a_picture_named_without_a_suffix_is_written_as_png_and_named_so(
     assert figure_file(str(tmp_path / "scan.svg")) == str(tmp_path / "scan.svg")
     with pytest.raises(argparse.ArgumentTypeError, match="expected a file name"):
         figure_file("")
+
+
+@pytest.mark.parametrize("argv", [
+    ["sim", "mission", "--seed", "1"],
+    ["sim", "lidar", "--at", "1,2,0"],
+    ["sim", "perceive", "--at", "0.8,2.9,0"],
+])
+def test_sim_commands_refuse_a_plot_without_matplotlib_before_running(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+        argv: list[str]) -> None:
+    real = outputs.importlib.util.find_spec
+    monkeypatch.setattr(outputs.importlib.util, "find_spec",
+                        lambda name, *a: None if name == "matplotlib" else real(name, *a))
+    import ramp.simulation.perceive as perceive_module
+
+    def never(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the work started")
+
+    monkeypatch.setattr(perceive_module, "perceive", never)
+    rc = cli.main([*argv, "--plot", str(tmp_path / "out.png")])
+    err = capsys.readouterr()
+    assert rc == 2, err
+    assert "--plot needs matplotlib: pip install 'ramp[plot]'" in err.err
+    assert not (tmp_path / "out.png").exists()
