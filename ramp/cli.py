@@ -70,8 +70,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     config, errors = check_config(args.file)
     if errors:
         _print_errors(errors)
-        print(f"{args.file}: {len(errors)} error{'s' if len(errors) != 1 else ''}",
-              file=sys.stderr)
+        named = args.file if args.file.strip() else "(no file name)"  # `ramp check ""`
+        print(f"{named}: {len(errors)} error{'s' if len(errors) != 1 else ''}", file=sys.stderr)
         return EXIT_CONFIG
     assert config is not None
     rules = len(config.interlocks)

@@ -184,3 +184,14 @@ def test_ramp_sim_mission_world_dev_zero_fails_at_once_with_one_line(world: str)
     assert done.stderr.strip() == \
         f"{world}: cannot read: it is a character device; expected a regular file"
     assert "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize("name", ["", " "])
+def test_ramp_check_of_an_empty_name_ends_with_a_line_that_names_no_file(
+        name: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """It ended `: 1 error`, a line starting with a colon."""
+    from ramp import cli
+
+    assert cli.main(["check", name]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[-1] == "(no file name): 1 error"
