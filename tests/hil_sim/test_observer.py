@@ -4,6 +4,7 @@ hook at None."""
 
 from __future__ import annotations
 
+import socket
 from typing import Any
 
 import pytest
@@ -57,12 +58,12 @@ class Recording(Observer):
 
 
 class Harness:
-    def __init__(self, observer: Observer | None) -> None:
+    def __init__(self, observer: Observer | None, host: str = "127.0.0.1") -> None:
         self.clock = VirtualClock()
         self.world = FakeWorld()
         self.sup = build(config_from(DEMO_YAML), self.clock,
                          lambda bc: SimBus(bc.name, dict(bc.params), world=self.world),
-                         host="127.0.0.1", port=0, observer=observer)
+                         host=host, port=0, observer=observer)
         self.sup.start()
         self.clients: list[harness.TestClient] = []
 
@@ -77,6 +78,23 @@ class Harness:
 
     def advance(self, seconds: float) -> None:
         self.sup.scheduler.run_for(seconds)
+
+
+def test_an_ipv6_client_is_named_with_its_address_in_brackets() -> None:
+    """The server named it `::1:41234` (in the recorder's MCP log, control events and log
+    lines), which no tool takes back as an address and port."""
+    if not socket.has_ipv6:  # pragma: no cover - every CI machine has ::1
+        pytest.skip("no IPv6")
+    rec = Recording()
+    h = Harness(rec, host="::1")
+    c = h.connect()
+    try:
+        assert c.ask("robot:control.acquire=(op)") == ""
+        peer = f"[::1]:{c.sock.getsockname()[1]}"
+        assert ("in", peer, b"robot:control.acquire=(op)") in rec.seen
+    finally:
+        c.sock.close()
+        h.sup.shutdown()
 
 
 def test_every_point_is_seen() -> None:

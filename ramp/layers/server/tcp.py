@@ -24,6 +24,7 @@ import socket
 from collections import deque
 from collections.abc import Callable
 
+from ramp.common.hostport import format_hostport
 from ramp.layers.robot_distribution import Client, RequestContext, RobotDistribution
 from ramp.mcp.messages import Request, error_response
 from ramp.mcp.protocol import (
@@ -182,7 +183,7 @@ class McpServer:
             except OSError as exc:
                 self._accept_failed(exc)
                 return
-            peer = f"{addr[0]}:{addr[1]}"
+            peer = format_hostport(addr[0], addr[1])  # [::1]:41234, as clients take it
             if len(self.clients) >= self.max_clients and not self._evict_for(peer):
                 self.refused += 1
                 log.warning("refused %s: already %d clients (server.max_clients), none silent "
