@@ -14,6 +14,8 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
+from ramp.autonomy.executive.scan import COVERAGE_NOTE
+from ramp.autonomy.perception.coverage import GroundCoverage
 from ramp.common.outputs import save_figure
 
 if TYPE_CHECKING:
@@ -96,6 +98,12 @@ def _map(ax: Any, run: MissionRun) -> None:
         for o in kit.log["obstacles"]:
             ax.add_patch(Circle((o.x, o.y), o.d / 2, fill=False, color="red", lw=1.2))
     if ctx is not None:
+        coverage = ctx.notes.get(COVERAGE_NOTE)
+        if isinstance(coverage, GroundCoverage):
+            cell = coverage.cell_m
+            for x, y in coverage.poorly_seen_centres().tolist():
+                ax.add_patch(Rectangle((x - cell / 2, y - cell / 2), cell, cell, lw=0,
+                                       color="grey", alpha=0.18))
         for disc in (*ctx.rocks, *ctx.craters):
             ax.add_patch(Circle((disc.x, disc.y), disc.radius, fill=False, color="red",
                                 lw=0.6, ls="--"))
@@ -133,7 +141,9 @@ def _map(ax: Any, run: MissionRun) -> None:
                        label="crater (true)"),
                 Line2D([], [], color="red", marker="o", ls="", fillstyle="none",
                        label="detected (dashed: kept off)"),
-                Line2D([], [], color="black", lw=0.6, alpha=0.5, label="planned")]
+                Line2D([], [], color="black", lw=0.6, alpha=0.5, label="planned"),
+                Line2D([], [], color="grey", marker="s", ls="", alpha=0.35,
+                       label="seen too thinly (kept off)")]
     ax.legend(handles=handles, loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8)
     ax.set_xlim(-0.3, length + 0.05)
     ax.set_ylim(-0.05, width + 0.05)

@@ -20,6 +20,7 @@ from ramp.autonomy.executive.pose import PoseTracker
 from ramp.autonomy.executive.robot import RobotLink
 from ramp.autonomy.executive.settings import ExecutiveSettings, settings_from
 from ramp.autonomy.perception import pipeline
+from ramp.autonomy.perception.coverage import GroundCoverage
 from ramp.autonomy.perception.pipeline import Localization, Obstacle, PoseEstimate
 from ramp.autonomy.perception.records import ScanRecord
 from ramp.autonomy.perception.stack import Perception
@@ -27,6 +28,8 @@ from ramp.autonomy.planning import FollowerConfig, Pose
 
 Localize = Callable[..., Localization]
 Detect = Callable[[Sequence[ScanRecord], PoseEstimate], list[Obstacle]]
+#: (records, pose, coverage so far or None) -> the coverage with the sweep's returns added.
+Cover = Callable[[Sequence[ScanRecord], PoseEstimate, GroundCoverage | None], GroundCoverage]
 
 
 @dataclass
@@ -41,6 +44,7 @@ class Kit:
     localize: Localize = pipeline.localize
     detect: Detect = pipeline.detect_obstacles
     start_box: str | None = None  # told before the run; None: try both (see sensing.py)
+    cover: Cover = pipeline.ground_coverage
     #: Everything drawn for `--plot`: paths planned and driven, obstacles detected.
     log: dict[str, Any] = field(default_factory=lambda: {
         "planned": [], "obstacles": [], "localizations": []})

@@ -7,7 +7,8 @@
 - **Detect Obstacles**: rocks and craters from the sweep at the pose it was taken from
   (`pipeline.detect_obstacles`), then the map the planner works on: every obstacle a disc
   grown by `obstacle_margin_m` (the detector's measured errors), more for one seen only in
-  part; and the digging spots, which never repeat, on that map.
+  part, and the ground the sweep saw too thinly to trust (`perception.coverage`), which the
+  planner keeps off where it can; and the digging spots, which never repeat, on that map.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from collections.abc import Sequence
 
 from ramp.autonomy.executive.sensing import DONE, FAILED, StopAndGoSweep
 from ramp.autonomy.executive.step import Step
+from ramp.autonomy.perception.coverage import GroundCoverage
 from ramp.autonomy.perception.pipeline import Obstacle, PoseEstimate, plan_scan
 from ramp.autonomy.planning import ArenaMap, DigSites, Disc, Planner
 from ramp.statemachine import MissionContext, Status
@@ -24,13 +26,15 @@ SWEEP_POSE_NOTE = "sweep_pose"  # ctx.notes: the PoseEstimate the sweep was take
 
 
 TIGHT_NOTE = "tight_map"  # ctx.notes: the map was rebuilt without the margin (see plan.py)
+COVERAGE_NOTE = "coverage"  # ctx.notes: GroundCoverage of every sweep so far
 
 
 def build_map(ctx: MissionContext, found: Sequence[Obstacle], margin: float,
               partial_margin: float) -> None:
     """The planner's map from detected obstacles, each disc grown by `margin` (and by
-    `partial_margin` more when seen only in part); the digging spots on it, keeping the
-    trenches already dug."""
+    `partial_margin` more when seen only in part), with the ground the sweeps saw too
+    thinly to trust (`COVERAGE_NOTE`); the digging spots on it, keeping the trenches
+    already dug."""
     rocks: list[Disc] = []
     craters: list[Disc] = []
     for o in found:
@@ -38,7 +42,11 @@ def build_map(ctx: MissionContext, found: Sequence[Obstacle], margin: float,
         (rocks if o.kind == "rock" else craters).append(Disc(o.x, o.y, 0.5 * o.d + grow))
     ctx.rocks, ctx.craters = rocks, craters
     dug = list(ctx.dig_sites.dug) if ctx.dig_sites is not None else []
-    ctx.planner = Planner(ArenaMap(obstacles=tuple(rocks) + tuple(craters)))
+    coverage = ctx.notes.get(COVERAGE_NOTE)
+    poorly_seen = coverage.poorly_seen_centres() if isinstance(coverage, GroundCoverage) \
+        else None
+    ctx.planner = Planner(ArenaMap(obstacles=tuple(rocks) + tuple(craters)),
+                          poorly_seen=poorly_seen)
     ctx.dig_sites = DigSites(ctx.planner)
     ctx.dig_sites.dug.extend(dug)
 
@@ -88,6 +96,7 @@ class DetectObstacles(Step):
         if not records or not isinstance(pose, PoseEstimate):
             return Status.failed("no 3D scan to detect obstacles in")
         found = kit.detect(records, pose)
+        ctx.notes[COVERAGE_NOTE] = kit.cover(records, pose, None)
         kit.log["obstacles"] = list(found)
         build_map(ctx, found, kit.settings.obstacle_margin_m, kit.settings.partial_margin_m)
         rocks, craters = ctx.rocks, ctx.craters

@@ -87,6 +87,7 @@ from ramp.autonomy import arena
 from ramp.autonomy.mount import rotation_zyx
 from ramp.autonomy.perception import localizer as loc
 from ramp.autonomy.perception.cloud import SweepPlan, merge, plan_sweep
+from ramp.autonomy.perception.coverage import GroundCoverage
 from ramp.autonomy.perception.lines import Segment
 from ramp.autonomy.perception.obstacles import Detection, Obstacle, fit_plane_ransac
 from ramp.autonomy.perception.obstacles import detect_obstacles as detect_in_cloud
@@ -447,6 +448,16 @@ def plan_scan(config: AutonomyConfig, pose: HasPose | None = None, *,
 def detect(records: Sequence[ScanRecord], pose: HasPose) -> Detection:
     """`obstacles.detect_obstacles` on the sweep's records merged at `pose`."""
     return detect_in_cloud(merge(records, pose.x, pose.y, pose.yaw))
+
+
+def ground_coverage(records: Sequence[ScanRecord], pose: HasPose,
+                    coverage: GroundCoverage | None = None) -> GroundCoverage:
+    """`coverage` (none yet: empty) with the returns of a sweep taken at `pose` counted in:
+    how densely the scans have sampled the obstacle region's floor (`perception.coverage`)."""
+    base = coverage if coverage is not None else GroundCoverage.empty()
+    if not records:
+        return base
+    return base.add(merge(records, pose.x, pose.y, pose.yaw).points)
 
 
 def detect_obstacles(records: Sequence[ScanRecord], pose: HasPose) -> list[Obstacle]:

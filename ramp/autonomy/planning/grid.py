@@ -112,6 +112,32 @@ class OccupancyGrid:
             cost += extra * np.clip(1.0 - np.hypot(gx - x, gy - y) / radius, 0.0, 1.0)
         return replace(self, cost=cost)
 
+    def with_poorly_seen(self, spots: NDArray[np.float64], radius: float,
+                         extra: float) -> OccupancyGrid:
+        """A copy whose cost rises by up to `extra` near ground the scans saw too thinly to
+        trust (`spots` (k, 2), the centres of such cells; perception.coverage): `extra` at a
+        spot, tapering to 0 at `radius` from the nearest one. Unlike `with_penalty` the
+        spots do not add up: a wide patch costs what its nearest cell does."""
+        pts = np.asarray(spots, dtype=float).reshape(-1, 2)
+        if pts.shape[0] == 0 or extra <= 0.0:
+            return self
+        r = self.resolution
+        nx, ny = self.shape
+        near = np.full((nx, ny), np.inf)
+        k = math.ceil(radius / r)
+        for x, y in pts.tolist():
+            ci, cj = math.floor(x / r), math.floor(y / r)
+            i0, i1 = max(0, ci - k), min(nx, ci + k + 1)
+            j0, j1 = max(0, cj - k), min(ny, cj + k + 1)
+            if i0 >= i1 or j0 >= j1:
+                continue
+            xs = (np.arange(i0, i1) + 0.5) * r
+            ys = (np.arange(j0, j1) + 0.5) * r
+            d = np.hypot(xs[:, None] - x, ys[None, :] - y)
+            np.minimum(near[i0:i1, j0:j1], d, out=near[i0:i1, j0:j1])
+        cost = self.cost + extra * np.clip(1.0 - near / radius, 0.0, 1.0)
+        return replace(self, cost=cost)
+
     # -- indexing ------------------------------------------------------------------------------
     @property
     def shape(self) -> tuple[int, int]:

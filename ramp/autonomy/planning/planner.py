@@ -58,6 +58,7 @@ STEP_MIN_M = 0.02  # nearer than this: only the turn
 SHORTCUT_TRIES = 8  # exact sweep checks per vertex when shortcutting
 REPAIR_RADIUS_M = 0.5  # a failed turn makes A* pay to pass within this of it ...
 REPAIR_COST = 6.0  # ... up to this much extra per cell at the spot itself
+POORLY_SEEN_COST = 2.0  # extra per cell with the robot's centre at poorly seen ground
 
 
 @dataclass(frozen=True)
@@ -84,15 +85,22 @@ class Planner:
 
     Plans keep `config.margin_m` between the footprint and anything where the layout allows;
     when no plan does, it tries again with `config.min_margin_m` (the result says which).
+    `poorly_seen` (k, 2), centres of ground the scans saw too thinly to trust
+    (`perception.coverage`): A* pays up to `POORLY_SEEN_COST` more per cell to bring the
+    robot's centre within its circumradius of one, so plans keep the footprint, at any yaw,
+    off such ground where they can; nothing is closed by it.
     """
 
-    def __init__(self, arena: ArenaMap, config: PlannerConfig | None = None) -> None:
+    def __init__(self, arena: ArenaMap, config: PlannerConfig | None = None, *,
+                 poorly_seen: FloatArray | None = None) -> None:
         self.arena = arena
         self.config = config or PlannerConfig()
-        self._levels = [_MarginPlanner(arena, self.config)]
+        self.poorly_seen = np.zeros((0, 2)) if poorly_seen is None else poorly_seen
+        self._levels = [_MarginPlanner(arena, self.config, self.poorly_seen)]
         if self.config.min_margin_m < self.config.margin_m:
             self._levels.append(_MarginPlanner(
-                arena, replace(self.config, margin_m=self.config.min_margin_m)))
+                arena, replace(self.config, margin_m=self.config.min_margin_m),
+                self.poorly_seen))
 
     @property
     def grid(self) -> OccupancyGrid:
@@ -156,10 +164,12 @@ class Planner:
 class _MarginPlanner:
     """The planner at one margin."""
 
-    def __init__(self, arena: ArenaMap, config: PlannerConfig) -> None:
+    def __init__(self, arena: ArenaMap, config: PlannerConfig,
+                 poorly_seen: FloatArray) -> None:
         self.arena = arena
         self.config = config
-        self.grid = OccupancyGrid.build(arena, config)
+        self.grid = OccupancyGrid.build(arena, config).with_poorly_seen(
+            poorly_seen, config.robot.circumradius_m, POORLY_SEEN_COST)
         robot = config.robot
         self._hl, self._hw = robot.half_length_m, robot.half_width_m
         self._lattice: HeadingLattice | None = None
