@@ -86,7 +86,10 @@ def test_an_ipv6_client_is_named_with_its_address_in_brackets() -> None:
     if not socket.has_ipv6:  # pragma: no cover - every CI machine has ::1
         pytest.skip("no IPv6")
     rec = Recording()
-    h = Harness(rec, host="::1")
+    try:
+        h = Harness(rec, host="::1")
+    except OSError:  # pragma: no cover - a container with IPv6 turned off
+        pytest.skip("cannot serve on ::1")
     c = h.connect()
     try:
         assert c.ask("robot:control.acquire=(op)") == ""

@@ -25,11 +25,13 @@ def test_returns_are_counted_per_cell_of_the_obstacle_region_in_the_ground_band(
     assert cov.counts.shape == (30, 39)  # 1.5..4.44 m by 0..3.88 m in 10 cm cells
     pts = np.vstack([_cell_points(1.55, 0.05, 3), _cell_points(2.01, 1.0, 2, z=0.25),
                      _cell_points(2.01, 1.0, 5, z=0.6),  # above the band: a wall, a person
+                     _cell_points(2.01, 1.0, 4, z=-0.5),  # below it: no floor is that deep
+                     _cell_points(2.21, 1.0, 1, z=-0.25),  # in a crater
                      _cell_points(1.2, 1.0, 9),  # the start region: not counted
                      _cell_points(4.5, 1.0, 9)])  # the digging region: not counted
     after = cov.add(pts)
-    assert after.counts[0, 0] == 3 and after.counts[5, 10] == 2
-    assert after.counts.sum() == 5
+    assert after.counts[0, 0] == 3 and after.counts[5, 10] == 2 and after.counts[7, 10] == 1
+    assert after.counts.sum() == 6
     assert cov.counts.sum() == 0  # add makes a copy
 
 

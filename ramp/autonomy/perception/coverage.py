@@ -9,6 +9,11 @@ than `MIN_RETURNS` returns in the ground band is *poorly seen*; the planner keep
 footprint off such cells where the layout lets it, as it keeps room to turn
 (`OccupancyGrid.with_poorly_seen`). Rocks block the floor behind them, so their shadows are
 poorly seen too. Each closer look adds its returns.
+
+The threshold belongs to the sweep it was measured on (`sweep_spacing_m` 4 cm, these 10 cm
+cells): a config that spaces the ground lines wider should lower it. Cells along a wall
+count the wall's own low returns, so they never read as poorly seen; the planner keeps the
+footprint off the walls anyway.
 """
 
 from __future__ import annotations
@@ -31,7 +36,7 @@ MIN_RETURNS = 12
 BAND_M = 0.3
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # an array inside: no field-wise == or hash
 class GroundCoverage:
     """Returns in the ground band per `cell_m` cell of the obstacle region, indexed [i, j]
     for x in [x0 + i cell, x0 + (i + 1) cell), y in [j cell, (j + 1) cell)."""
