@@ -290,3 +290,24 @@ def test_the_first_dig_expects_the_way_home_at_the_way_outs_pace_over_its_length
     ctx.notes[OUT_M_NOTE] = 3.4
     dig._expect_home()
     assert ctx.estimates.home_s == 90.0
+
+
+# -- tight plans ---------------------------------------------------------------------------------
+def test_a_plan_passing_closer_than_the_nominal_check_margin_is_driven_with_fixes_twice_as_often(
+        ) -> None:
+    """Randomized seed 502 clipped a crater over 1500 s on a way home planned with 2.4 cm to
+    spare, 1.2 m from its last fix; with fixes every 0.6 m on such plans it does not."""
+    from types import SimpleNamespace
+
+    from ramp.autonomy.executive.crossing import TIGHT_CLEARANCE_M, fix_spacing
+    from ramp.autonomy.planning import PlanResult
+
+    kit = SimpleNamespace(settings=ExecutiveSettings())
+    every = ExecutiveSettings().relocalize_every_m
+    leg = Path(np.array([[0.0, 0.0], [1.0, 0.0]]), final_yaw=None)
+    tight = PlanResult((leg,), min_clearance_m=0.024, margin_m=0.05)
+    roomy = PlanResult((leg,), min_clearance_m=TIGHT_CLEARANCE_M, margin_m=0.10)
+    unknown = PlanResult((leg,))  # no clearance worked out: NaN
+    assert fix_spacing(kit, tight) == pytest.approx(0.5 * every)  # type: ignore[arg-type]
+    assert fix_spacing(kit, roomy) == every  # type: ignore[arg-type]
+    assert fix_spacing(kit, unknown) == every  # type: ignore[arg-type]

@@ -11,16 +11,37 @@
 - **Cross home** drives `ctx.plan` (from `PlanPathHome`) to the collector: the approach in
   front of it, a fix there, then straight back, stopping a few centimetres short of the
   wall; Dock finishes on the buttons.
+
+Both crossings localize twice as often on a plan that passes closer than `TIGHT_CLEARANCE_M`
+to something (`fix_spacing`): on a tight layout every plan is made at the smallest margin,
+with a few centimetres to spare, and a robot that is not its model drifts more than that
+over the usual 1.2 m between fixes (randomized seed 502 clipped a crater so over 1500 s).
 """
 
 from __future__ import annotations
 
+import math
+
 from ramp.autonomy.executive.drive import PlanDriver
+from ramp.autonomy.executive.kit import Kit
 from ramp.autonomy.executive.look import RUNNING, LookAgain, wants_look
 from ramp.autonomy.executive.plan import StartPlanners, plan_home, plan_vantage
 from ramp.autonomy.executive.step import Step
 from ramp.autonomy.planning import PlanResult, Pose
 from ramp.statemachine import Status
+
+#: A plan whose footprint passes closer than this to a wall or an obstacle is driven with
+#: fixes twice as often: the nominal plan keeps 5 cm (half its 10 cm margin), so closer
+#: means the smallest margin's plan on a tight layout.
+TIGHT_CLEARANCE_M = 0.05
+
+
+def fix_spacing(kit: Kit, plan: PlanResult) -> float:
+    """How far to drive between fixes on `plan`: `relocalize_every_m`, halved on a tight
+    plan (see the module docstring)."""
+    every = kit.settings.relocalize_every_m
+    tight = math.isfinite(plan.min_clearance_m) and plan.min_clearance_m < TIGHT_CLEARANCE_M
+    return 0.5 * every if tight else every
 
 
 class PrepareForScan(Step):
@@ -65,7 +86,8 @@ class CrossToDig(Step):
             assert ctx.planner is not None
             self.driver = PlanDriver(self, ctx.plan.legs, replan=self._plan,
                                      check=ctx.planner.accepts,
-                                     look=lambda pose: wants_look(self, pose))
+                                     look=lambda pose: wants_look(self, pose),
+                                     relocalize_every_m=fix_spacing(self.kit, ctx.plan))
         if self.driver.paused:
             return self._look_again(now, self.driver)
         return self.driver.tick(now)
@@ -111,7 +133,8 @@ class CrossHome(Step):
                 return Status.failed("no plan home")
             assert ctx.planner is not None
             self.driver = PlanDriver(self, ctx.plan.legs, replan=self._plan,
-                                     fix_before_reverse=True, check=ctx.planner.accepts)
+                                     fix_before_reverse=True, check=ctx.planner.accepts,
+                                     relocalize_every_m=fix_spacing(self.kit, ctx.plan))
         return self.driver.tick(now)
 
     def end(self) -> None:
