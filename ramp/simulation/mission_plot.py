@@ -14,8 +14,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
-from ramp.autonomy.executive.scan import COVERAGE_NOTE
-from ramp.autonomy.perception.coverage import GroundCoverage
+from ramp.autonomy.executive.scan import coverage_of
 from ramp.common.outputs import save_figure
 
 if TYPE_CHECKING:
@@ -98,8 +97,8 @@ def _map(ax: Any, run: MissionRun) -> None:
         for o in kit.log["obstacles"]:
             ax.add_patch(Circle((o.x, o.y), o.d / 2, fill=False, color="red", lw=1.2))
     if ctx is not None:
-        coverage = ctx.notes.get(COVERAGE_NOTE)
-        if isinstance(coverage, GroundCoverage):
+        coverage = coverage_of(ctx)
+        if coverage is not None:
             cell = coverage.cell_m
             for x, y in coverage.poorly_seen_centres().tolist():
                 ax.add_patch(Rectangle((x - cell / 2, y - cell / 2), cell, cell, lw=0,

@@ -20,8 +20,6 @@ over the usual 1.2 m between fixes (randomized seed 502 clipped a crater so over
 
 from __future__ import annotations
 
-import math
-
 from ramp.autonomy.executive.drive import PlanDriver
 from ramp.autonomy.executive.kit import Kit
 from ramp.autonomy.executive.look import RUNNING, LookAgain, wants_look
@@ -40,8 +38,8 @@ def fix_spacing(kit: Kit, plan: PlanResult) -> float:
     """How far to drive between fixes on `plan`: `relocalize_every_m`, halved on a tight
     plan (see the module docstring)."""
     every = kit.settings.relocalize_every_m
-    tight = math.isfinite(plan.min_clearance_m) and plan.min_clearance_m < TIGHT_CLEARANCE_M
-    return 0.5 * every if tight else every
+    # A plan whose clearance was not worked out (NaN) compares False: the usual spacing.
+    return 0.5 * every if plan.min_clearance_m < TIGHT_CLEARANCE_M else every
 
 
 class PrepareForScan(Step):

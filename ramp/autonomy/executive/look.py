@@ -19,10 +19,9 @@ import logging
 import math
 from collections.abc import Sequence
 
-from ramp.autonomy.executive.scan import COVERAGE_NOTE, TIGHT_NOTE, build_map
+from ramp.autonomy.executive.scan import COVERAGE_NOTE, TIGHT_NOTE, build_map, coverage_of
 from ramp.autonomy.executive.sensing import DONE, FAILED, StopAndGoSweep
 from ramp.autonomy.executive.step import Step
-from ramp.autonomy.perception.coverage import GroundCoverage
 from ramp.autonomy.perception.pipeline import Obstacle, PoseEstimate, plan_scan
 from ramp.autonomy.planning import Pose
 
@@ -100,10 +99,7 @@ class LookAgain:
         if self.sweep is None or self.sweep.state != DONE or self.pose is None:
             return []
         found = kit.detect(self.sweep.records, self.pose)
-        coverage = ctx.notes.get(COVERAGE_NOTE)
-        ctx.notes[COVERAGE_NOTE] = kit.cover(
-            self.sweep.records, self.pose,
-            coverage if isinstance(coverage, GroundCoverage) else None)
+        ctx.notes[COVERAGE_NOTE] = kit.cover(self.sweep.records, self.pose, coverage_of(ctx))
         old = list(kit.log["obstacles"])
         merged = merge_obstacles(old, found)
         kit.log["obstacles"] = merged

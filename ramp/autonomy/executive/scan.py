@@ -29,6 +29,12 @@ TIGHT_NOTE = "tight_map"  # ctx.notes: the map was rebuilt without the margin (s
 COVERAGE_NOTE = "coverage"  # ctx.notes: GroundCoverage of every sweep so far
 
 
+def coverage_of(ctx: MissionContext) -> GroundCoverage | None:
+    """The floor coverage of the sweeps so far (`COVERAGE_NOTE`), None before the first."""
+    coverage = ctx.notes.get(COVERAGE_NOTE)
+    return coverage if isinstance(coverage, GroundCoverage) else None
+
+
 def build_map(ctx: MissionContext, found: Sequence[Obstacle], margin: float,
               partial_margin: float) -> None:
     """The planner's map from detected obstacles, each disc grown by `margin` (and by
@@ -42,9 +48,8 @@ def build_map(ctx: MissionContext, found: Sequence[Obstacle], margin: float,
         (rocks if o.kind == "rock" else craters).append(Disc(o.x, o.y, 0.5 * o.d + grow))
     ctx.rocks, ctx.craters = rocks, craters
     dug = list(ctx.dig_sites.dug) if ctx.dig_sites is not None else []
-    coverage = ctx.notes.get(COVERAGE_NOTE)
-    poorly_seen = coverage.poorly_seen_centres() if isinstance(coverage, GroundCoverage) \
-        else None
+    coverage = coverage_of(ctx)
+    poorly_seen = coverage.poorly_seen_centres() if coverage is not None else None
     ctx.planner = Planner(ArenaMap(obstacles=tuple(rocks) + tuple(craters)),
                           poorly_seen=poorly_seen)
     ctx.dig_sites = DigSites(ctx.planner)
