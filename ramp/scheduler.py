@@ -188,6 +188,13 @@ class Scheduler:
         self.tasks.append(task)
         return task
 
+    def rate_at_most(self, rate_hz: float) -> float:
+        """The fastest rate a task can have that is no faster than `rate_hz`: the base rate
+        over a whole divisor (50 Hz on a 100 Hz loop stays 50; on a 60 Hz loop it is 30)."""
+        if not (math.isfinite(rate_hz) and rate_hz > 0):
+            raise ValueError(f"a task rate must be a positive number of Hz, got {rate_hz!r}")
+        return self.rate_hz / max(1, math.ceil(self.rate_hz / rate_hz - 1e-9))
+
     def remove_task(self, task: ScheduledTask) -> None:
         if task in self.tasks:
             self.tasks.remove(task)

@@ -34,6 +34,23 @@ def test_rate_that_does_not_divide_is_refused() -> None:
         Scheduler(VirtualClock(), 0)
 
 
+@pytest.mark.parametrize(("base", "asked", "rate"), [
+    (100, 50, 50), (100, 100, 100), (100, 30, 25), (100, 1000, 100), (60, 50, 30),
+    (200, 50, 50), (100, 0.1, 0.1),
+])
+def test_rate_at_most_is_the_fastest_divisor_rate_no_faster_than_asked(
+        base: float, asked: float, rate: float) -> None:
+    s = Scheduler(VirtualClock(), base)
+    assert s.rate_at_most(asked) == pytest.approx(rate)
+    s.add_task("t", s.rate_at_most(asked), lambda now, dt: None)  # always accepted
+
+
+@pytest.mark.parametrize("asked", [0, -5, float("nan"), float("inf")])
+def test_rate_at_most_refuses_what_is_no_rate(asked: float) -> None:
+    with pytest.raises(ValueError, match="positive number of Hz"):
+        Scheduler(VirtualClock(), 100).rate_at_most(asked)
+
+
 def test_overrun_skips_missed_ticks_and_names_the_task() -> None:
     clock = VirtualClock()
     s = Scheduler(clock, 100)
