@@ -50,6 +50,7 @@ def summary(cfg: AutonomyConfig) -> list[str]:
         f"backend {cfg.backend}",
         f"lidar {format_hostport(cfg.lidar.host, cfg.lidar.port)}",
         f"imu {cfg.imu.driver} serial {cfg.imu.serial} every {cfg.imu.data_interval_ms} ms",
+        f"state estimation (IMU, AHRS, odometry) at {cfg.estimation_hz:g} Hz",
         f"gimbal {g.driver} serial {g.serial}: pan channel {g.pan.channel} "
         f"{g.pan.min_deg:g}..{g.pan.max_deg:g} deg, tilt channel {g.tilt.channel} "
         f"{g.tilt.min_deg:g}..{g.tilt.max_deg:g} deg",

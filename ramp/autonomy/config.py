@@ -124,7 +124,14 @@ MISSION_FIELDS: dict[str, Field] = {
     "dump_done_kg": Field(float, 0.5, lo=0.0, hi=100.0, what="a load in kg"),
 }
 
-TOP_KEYS = ("backend", "lidar", "imu", "gimbal", "mission")
+TOP_KEYS = ("backend", "estimation_hz", "lidar", "imu", "gimbal", "mission")
+
+#: The rate of state estimation: the IMU driver, the AHRS and wheel odometry. Every IMU sample
+#: is taken in, in batches, whatever the rate; the attitude and the odometry pose are read by
+#: the 20 Hz mission. The LIDAR driver, scan collection and the gimbal stay at the loop rate: a
+#: 3D sweep waits on them at every tilt. It must divide the 100 Hz loop.
+ESTIMATION_HZ = 50.0
+LOOP_HZ = 100.0
 
 
 @dataclass(frozen=True)
@@ -181,6 +188,7 @@ class AutonomyConfig:
     file: str = ""
     backend_host: str = DEFAULT_BACKEND[0]
     backend_port: int = DEFAULT_BACKEND[1]
+    estimation_hz: float = ESTIMATION_HZ
     lidar: LidarConfig = LidarConfig()
     imu: ImuConfig = ImuConfig()
     gimbal: GimbalConfig = GimbalConfig()
@@ -315,6 +323,7 @@ def parse_config(text: str, name: str = "autonomy.yaml"
             backend = parse_address(root["backend"])
         except ValueError as exc:
             c.err("backend", root.line_of("backend"), str(exc))
+    estimation_hz = _estimation_hz(c, root)
     lidar = _lidar(c, root)
     imu = _imu(c, root)
     gimbal = _gimbal(c, root)
@@ -322,8 +331,25 @@ def parse_config(text: str, name: str = "autonomy.yaml"
     if c.errors:
         return None, c.errors
     return AutonomyConfig(file=name, backend_host=backend[0], backend_port=backend[1],
-                          lidar=lidar, imu=imu, gimbal=gimbal,
+                          estimation_hz=estimation_hz, lidar=lidar, imu=imu, gimbal=gimbal,
                           mission=MappingProxyType(mission)), []
+
+
+def _estimation_hz(c: _Checker, root: LinedMap) -> float:
+    """`estimation_hz`: a rate that divides the 100 Hz loop (100, 50, 25, 20, 10, ...)."""
+    if "estimation_hz" not in root:
+        return ESTIMATION_HZ
+    value, line = root["estimation_hz"], root.line_of("estimation_hz")
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        c.err("estimation_hz", line, f"{shorten(repr(value))} is not a number; expected a rate in "
+              "Hz that divides 100 (100, 50, 25, 20, 10, ...)")
+        return ESTIMATION_HZ
+    ratio = LOOP_HZ / value if value > 0 else math.inf
+    if not (1.0 <= value <= LOOP_HZ and abs(ratio - round(ratio)) < 1e-9):
+        c.err("estimation_hz", line, f"{value:g} Hz does not divide the autonomy's {LOOP_HZ:g} Hz "
+              "loop; expected 100, 50, 25, 20, 10, ... (at least 1)")
+        return ESTIMATION_HZ
+    return float(value)
 
 
 def _lidar(c: _Checker, root: LinedMap) -> LidarConfig:

@@ -43,6 +43,7 @@ def test_the_example_for_marte_loads() -> None:
     assert (g.tilt.min_deg, g.tilt.max_deg) == (-30.0, 80.0)
     assert g.pivot == (0.40, 0.0, 0.70)
     assert cfg.mission["duration_s"] == 600.0 and cfg.mission["max_relocalize_tries"] == 3
+    assert cfg.estimation_hz == 50.0
 
 
 def test_an_empty_file_gives_the_defaults() -> None:
@@ -71,8 +72,8 @@ def test_every_error_is_reported_at_once_with_file_line_and_key() -> None:
         radar: {}
         """)
     assert errs == [
-        "a.yaml:14: radar: unknown section (expected one of: backend, lidar, imu, gimbal, "
-        "mission)",
+        "a.yaml:14: radar: unknown section (expected one of: backend, estimation_hz, lidar, imu, "
+        "gimbal, mission)",
         "a.yaml:1: backend: 'robot': no port; expected HOST:PORT (for example "
         "192.168.1.10:5577)",
         "a.yaml:2: lidar.port: 70000 is not a TCP port (1-65535)",
@@ -154,6 +155,25 @@ def test_backend_addresses_parse(text: str, expected: tuple[str, int]) -> None:
     assert parse_address(text) == expected
 
 
+@pytest.mark.parametrize(("value", "hz"), [("100", 100.0), ("50", 50.0), ("25.0", 25.0),
+                                           ("20", 20.0), ("1", 1.0)])
+def test_estimation_rates_that_divide_the_loop_are_taken(value: str, hz: float) -> None:
+    cfg, errors = parse_config(f"backend: 10.0.0.2:5577\nestimation_hz: {value}\n", "a.yaml")
+    assert errors == [] and cfg is not None and cfg.estimation_hz == hz
+
+
+@pytest.mark.parametrize(("value", "says"), [
+    ("30", "30 Hz does not divide the autonomy's 100 Hz loop"),
+    ("200", "200 Hz does not divide"), ("0", "0 Hz does not divide"), ("-50", "-50 Hz"),
+    ("0.5", "0.5 Hz does not divide"), ("fast", "'fast' is not a number"),
+    ("true", "True is not a number"), (".nan", "nan is not a number"),
+])
+def test_an_estimation_rate_that_does_not_divide_the_loop_is_refused_at_its_line(
+        value: str, says: str) -> None:
+    (error,) = errors_of(f"backend: 10.0.0.2:5577\nestimation_hz: {value}\n")
+    assert error.startswith("a.yaml:2: estimation_hz: ") and says in error
+
+
 @pytest.mark.parametrize("text", ["5577", ":5577", "host:", "host:0", "host:99999", "a b:1"])
 def test_bad_backend_addresses_are_refused(text: str) -> None:
     with pytest.raises(ValueError):
@@ -194,6 +214,7 @@ def test_check_prints_ok_for_the_example(capsys: pytest.CaptureFixture[str]) -> 
     assert main(["check", str(EXAMPLE)]) == 0
     out = capsys.readouterr().out
     assert out.startswith(f"{EXAMPLE}: ok") and "pan channel 0 -90..90 deg" in out
+    assert "state estimation (IMU, AHRS, odometry) at 50 Hz" in out
 
 
 def test_a_state_timeout_is_checked_with_the_file() -> None:

@@ -229,3 +229,31 @@ def test_scans_on_demand_come_one_per_request() -> None:
         assert rig.lidar.request_scan()
         rig.run_for(0.1)
         assert len(rig.scans.records) == before + 1
+
+
+@pytest.mark.parametrize(("loop_hz", "estimation_hz", "expected"), [
+    (100.0, 50.0, 50.0), (100.0, 100.0, 100.0), (100.0, 20.0, 20.0),
+    (200.0, 50.0, 50.0), (40.0, 50.0, 40.0), (60.0, 50.0, 30.0),
+])
+def test_state_estimation_runs_at_its_rate_and_what_a_sweep_waits_on_at_the_loops(
+        loop_hz: float, estimation_hz: float, expected: float) -> None:
+    """`estimation_hz` (autonomy.yaml) sets the rate of the IMU driver, odometry and the
+    AHRS; on a loop it does not divide, the nearest slower rate that does (never faster than
+    asked). The LIDAR driver, the scan collector and the gimbal run at the loop's rate."""
+    cfg = replace(load_autonomy_config(), estimation_hz=estimation_hz)
+    with Rig(MarteWorld.seeded(1), cfg, rate_hz=loop_hz) as rig:
+        rates = {t.name: loop_hz / t.divisor for t in rig.scheduler.tasks
+                 if t.name.startswith("autonomy.")}
+        assert rates == {"autonomy.imu": expected, "autonomy.odometry": expected,
+                         "autonomy.ahrs": expected, "autonomy.lidar": loop_hz,
+                         "autonomy.scans": loop_hz, "autonomy.gimbal.servos": loop_hz,
+                         "autonomy.gimbal.level": loop_hz}
+        imu = next(t for t in rig.scheduler.tasks if t.name == "autonomy.imu")
+        rig.run_for(1.0)
+        assert imu.runs == pytest.approx(expected, abs=1)
+
+
+def test_the_example_autonomy_yaml_estimates_at_50_hz() -> None:
+    with Rig(MarteWorld.seeded(1)) as rig:
+        halved = {t.name for t in rig.scheduler.tasks if t.divisor == 2}
+        assert halved == {"autonomy.imu", "autonomy.odometry", "autonomy.ahrs"}

@@ -35,6 +35,9 @@ from ramp.statemachine import Activity, Executive, Mission, MissionConfig
 OWNER = "autonomy"  # SPEC 6.3: the autonomy acquires control under this name
 MISSION_HZ = 20.0
 POLL_TASK_HZ = 20.0
+#: The link's own task: time-outs and what the socket would not take at once. Replies are read
+#: the moment they arrive (the loop watches the socket), so this is not their latency.
+LINK_HZ = 50.0
 
 
 class Autonomy:
@@ -62,7 +65,7 @@ class Autonomy:
         self.robot.on_foreign_owner = self._foreign_owner
         rate = scheduler.rate_hz
         self.tasks: list[ScheduledTask] = [
-            scheduler.add_task("autonomy.mcp", rate, self.link.tick),
+            scheduler.add_task("autonomy.mcp", scheduler.rate_at_most(LINK_HZ), self.link.tick),
             scheduler.add_task("autonomy.poll", min(rate, POLL_TASK_HZ), self.robot.tick),
             scheduler.add_task("autonomy.pose", mission_hz, self._pose_tick),
             scheduler.add_task("mission", mission_hz, self.mission.tick),

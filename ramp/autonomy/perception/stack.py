@@ -38,13 +38,18 @@ class Perception:
         self._scheduler: Scheduler | None = None
 
     def add_tasks(self, scheduler: Scheduler) -> None:
-        """Register every task at the scheduler's base rate, in data order."""
-        rate = scheduler.rate_hz
+        """Register every task, in data order: state estimation (IMU, odometry, AHRS) at
+        `estimation_hz`; the LIDAR, the scan collector and the gimbal, which a sweep waits on
+        at every tilt, at the base rate."""
+        # On a loop `estimation_hz` does not divide (a test's), the nearest slower rate.
+        base, estimation = scheduler.rate_hz, scheduler.rate_at_most(self.config.estimation_hz)
         self._scheduler = scheduler
-        for name, fn in (("lidar", self.lidar.tick), ("imu", self.imu.tick),
-                         ("gimbal.servos", self.pan_tilt.tick), ("odometry", self.odometry.tick),
-                         ("ahrs", self.ahrs.tick), ("scans", self.scans.tick),
-                         ("gimbal.level", self.leveller.tick)):
+        for name, rate, fn in (
+                ("lidar", base, self.lidar.tick), ("imu", estimation, self.imu.tick),
+                ("gimbal.servos", base, self.pan_tilt.tick),
+                ("odometry", estimation, self.odometry.tick),
+                ("ahrs", estimation, self.ahrs.tick), ("scans", base, self.scans.tick),
+                ("gimbal.level", base, self.leveller.tick)):
             self.tasks.append(scheduler.add_task(f"autonomy.{name}", rate, fn))
 
     def start(self, now: float, *, stream: bool = True) -> None:
