@@ -60,6 +60,7 @@ MODULES = [
     "ramp/autonomy/executive/robot.py",
     "ramp/autonomy/planning/follower.py",
     "ramp/autonomy/planning/geometry.py",
+    "ramp/autonomy/planning/astar.py",
     "ramp/layers/server/tcp.py",
     "ramp/layers/functional/base_drive.py",
 ]
