@@ -188,3 +188,15 @@ def test_an_unwritable_out_is_refused_before_any_benchmark(tmp_path: Path) -> No
                            str(bad)], cwd=REPO, capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and proc.stdout == ""  # nothing ran: no JSON document
     assert f"--out: cannot write {bad}: Not a directory" in proc.stderr
+
+
+@pytest.mark.timeout(120)
+def test_the_mission_figures_are_medians_and_each_run_is_listed(
+        smoke: dict[str, Any]) -> None:
+    mission = dict(smoke["mission"])
+    assert mission["real_time_factors"] and mission["world_step_factors"]
+    mission["real_time_factors"] = [50.3, 58.6, 63.8]
+    mission["world_step_factors"] = [333.2, 591.7, 456.9]
+    text = render({**smoke, "mission": mission})
+    assert ("The medians of 3 runs: real-time factors 50.3, 58.6, 63.8 (`world.step` alone "
+            "333.2, 591.7, 456.9).") in text
