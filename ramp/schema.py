@@ -56,7 +56,10 @@ class Field:
         """Return the value converted to `kind`, or raise ValueError saying what was expected."""
         v = value
         if self.kind is float and isinstance(v, int) and not isinstance(v, bool):
-            v = float(v)
+            try:
+                v = float(v)
+            except OverflowError:  # an integer of hundreds of digits: no float holds it
+                raise ValueError(f"{shorten(repr(value))} is not {self.expected()}") from None
         if self.kind is str and isinstance(v, int | float) and not isinstance(v, bool):
             v = str(v)
         if not isinstance(v, self.kind) or (self.kind is not bool and isinstance(v, bool)):

@@ -66,6 +66,10 @@ HOSTILE = {
     "a blank CAN channel": (GOOD.replace("{driver: sim}", "{driver: sim}\n  c: {driver: can, "
                                          "channel: ' '}"),
                             "ramp.yaml:4: buses.c.channel: ' ' is not a CAN channel"),
+    # A float key given an integer no float holds: OverflowError out of the check, once.
+    "a 400-digit number where a float goes": (
+        "scheduler: {rate_hz: " + "1" + "0" * 400 + "}\n" + GOOD,
+        "ramp.yaml:1: scheduler.rate_hz: 1000000000"),
     "an unknown python-can interface": (
         GOOD.replace("{driver: sim}", "{driver: sim}\n  c: {driver: can, interface: nope, "
                      "channel: can0}"),
