@@ -132,6 +132,8 @@ TOP_KEYS = ("backend", "estimation_hz", "lidar", "imu", "gimbal", "mission")
 #: 3D sweep waits on them at every tilt. It must divide the 100 Hz loop.
 ESTIMATION_HZ = 50.0
 LOOP_HZ = 100.0
+#: The mission's rate (ramp/autonomy/executive/autonomy.py MISSION_HZ): estimation no slower.
+MISSION_READS_HZ = 20.0
 
 
 @dataclass(frozen=True)
@@ -335,19 +337,32 @@ def parse_config(text: str, name: str = "autonomy.yaml"
                           mission=MappingProxyType(mission)), []
 
 
+def _finite_number(value: Any) -> bool:
+    """An int or float that is finite as a float (a 400-digit integer is not: no float holds
+    it, and `math.isfinite` raises on it)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
 def _estimation_hz(c: _Checker, root: LinedMap) -> float:
-    """`estimation_hz`: a rate that divides the 100 Hz loop (100, 50, 25, 20, 10, ...)."""
+    """`estimation_hz`: 100, 50, 25 or 20: a rate that divides the 100 Hz loop and is no
+    slower than the 20 Hz mission that reads the attitude and the pose (at 1 Hz a run lost
+    its localization twice and delivered nothing)."""
     if "estimation_hz" not in root:
         return ESTIMATION_HZ
     value, line = root["estimation_hz"], root.line_of("estimation_hz")
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        c.err("estimation_hz", line, f"{shorten(repr(value))} is not a number; expected a rate in "
-              "Hz that divides 100 (100, 50, 25, 20, 10, ...)")
+    expected = ("expected 100, 50, 25 or 20 (a rate that divides the autonomy's 100 Hz loop, no "
+                f"slower than the {MISSION_READS_HZ:g} Hz mission)")
+    if not _finite_number(value):
+        c.err("estimation_hz", line, f"{shorten(repr(value))} is not a number; {expected}")
         return ESTIMATION_HZ
     ratio = LOOP_HZ / value if value > 0 else math.inf
-    if not (1.0 <= value <= LOOP_HZ and abs(ratio - round(ratio)) < 1e-9):
-        c.err("estimation_hz", line, f"{value:g} Hz does not divide the autonomy's {LOOP_HZ:g} Hz "
-              "loop; expected 100, 50, 25, 20, 10, ... (at least 1)")
+    if not (MISSION_READS_HZ <= value <= LOOP_HZ and abs(ratio - round(ratio)) < 1e-9):
+        c.err("estimation_hz", line, f"{value:g} Hz: {expected}")
         return ESTIMATION_HZ
     return float(value)
 
@@ -445,8 +460,7 @@ def _mission(c: _Checker, root: LinedMap) -> dict[str, float]:
         try:
             if f is not None:
                 out[k] = f.check(value)
-            elif (isinstance(value, int | float) and not isinstance(value, bool)
-                  and math.isfinite(value)):
+            elif _finite_number(value):
                 out[k] = value
             else:
                 raise ValueError(f"{value!r} is not a number")
