@@ -5,7 +5,8 @@ clock) and in the simulator (`ramp sim mission`: the rig's drivers on the emulat
 virtual clock). The caller brings the scheduler and the sensing (`Perception`, its tasks
 already added, so they run first in every tick); this adds, in data order:
 
-    autonomy.mcp    the link's I/O (connect, read, time out)           every tick
+    autonomy.mcp    the link's own work (connect, time out; replies are read by the loop
+                    the moment they arrive)                               50 Hz
     autonomy.poll   `RobotLink`: polls robot/base/ble, watchdog feeding  20 Hz
     autonomy.pose   the pose tracker (after odometry and the AHRS), the bin load into the
                     mission's context                                     mission rate

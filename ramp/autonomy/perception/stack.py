@@ -5,7 +5,9 @@ Built the same way on the robot (Phidget22 drivers, the Hokuyo at its address) a
 simulation (the `sim` drivers bound to emulators, the Hokuyo emulator on loopback): the caller
 makes the three devices, this wires what stands on them. Task order within a tick follows the
 data: drivers collect, odometry integrates, the AHRS takes in the new samples, the collector
-samples the servo angles, the gimbal levels on the fresh attitude.
+samples the servo angles, the gimbal levels on the newest attitude. State estimation (the IMU
+driver, odometry, the AHRS) runs at `estimation_hz`, every other tick by default; the LIDAR,
+the collector and the gimbal every tick.
 """
 
 from __future__ import annotations
