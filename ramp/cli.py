@@ -78,6 +78,11 @@ def cmd_check(args: argparse.Namespace) -> int:
     print(f"{args.file}: ok ({len(config.buses)} buses, {len(config.modules)} modules: "
           f"{', '.join(config.modules) or 'none'}"
           + (f"; {rules} interlock{'s' if rules != 1 else ''}" if rules else "") + ")")
+    if getattr(args, "explain", False):  # what each interlock covers (SPEC 11)
+        from ramp.config.interlocks import explain
+
+        for line in explain(config.interlocks, config.modules) or ["no interlocks"]:
+            print(line)
     return 0
 
 
@@ -249,6 +254,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.set_defaults(func=cmd_run)
     check = sub.add_parser("check", help="validate a config file without touching hardware")
     check.add_argument("file", nargs="?", default="ramp.yaml")
+    check.add_argument("--explain", action="store_true",
+                       help="list, per interlock rule, every function it covers")
     check.set_defaults(func=cmd_check)
     from ramp.simulation.commands import add_sim_parser  # `ramp sim …`: lazy, light to import
 

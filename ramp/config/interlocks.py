@@ -5,6 +5,13 @@
         when: "ble:lift.pos > 0.5"         # ramp.layers.robot_distribution.condition
         refuse: ["ble:chain.vel"]          # exactly one of refuse, stop, limit
         latch: false                       # optional
+        severity: warning                  # optional: info, warning (default) or error
+        message: "Lower the bin first"     # optional: the operator's advice
+
+A `refuse` or `stop` entry is a pattern, or a map `{PATTERN: forward|reverse}` forbidding one
+direction only. A name may not be `none` (what `interlock.active` reads with no rule active);
+a message travels in MCP values, so it is printable ASCII without `,` `(` `)`; at most
+`MAX_RULES` rules.
 
 Every name a rule uses is checked against the module tables: a property must be a get row
 of a module in `modules:`, a pattern must name at least one motion function, and a `limit`
@@ -17,6 +24,7 @@ check, so a rule that names a missing device fails both with the same file:line:
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -31,10 +39,15 @@ from ramp.layers.robot_distribution.condition import (
 )
 from ramp.layers.robot_distribution.interlocks import (
     ACTIONS,
+    DIRECTIONS,
+    MAX_RULES,
     PATTERN,
     PROPERTY,
+    RESERVED_NAMES,
     RULE_NAME,
+    SEVERITIES,
     RuleSpec,
+    covered,
     find_property,
     motion_matches,
     speed_param,
@@ -42,7 +55,10 @@ from ramp.layers.robot_distribution.interlocks import (
 from ramp.modules import module_class
 from ramp.schema import shorten
 
-KEYS = ("name", "when", "refuse", "stop", "limit", "latch")
+KEYS = ("name", "when", "refuse", "stop", "limit", "latch", "severity", "message")
+#: The longest `message:` (one line of advice in an alert).
+MAX_MESSAGE = 200
+_MESSAGE = re.compile(r"[\x20-\x27\x2a\x2b\x2d-\x7e]+\Z")
 
 Err = Callable[[str, int, str], None]
 
@@ -117,6 +133,10 @@ def check_interlocks(raw: Any, line: int, modules: Mapping[str, Any], err: Err,
         err("interlocks", line, f"expected a list of rules (- name: ..., when: ..., one of "
                                 f"refuse/stop/limit), got {kind_of(raw)}")
         return ()
+    if len(raw) > MAX_RULES:
+        err("interlocks", line, f"{len(raw)} rules; at most {MAX_RULES} (every request and "
+                                "tick may evaluate them: merge rules that share a condition)")
+        return ()
     tables = _Tables(modules)
     out: list[RuleSpec] = []
     seen: dict[str, str] = {}
@@ -151,6 +171,10 @@ def _rule(entry: LinedMap, path: str, tables: _Tables, err: Err, modules_ok: boo
         err(f"{path}.name", at("name"), f"{given}; expected 1-32 letters, digits, _ or - (the "
                                         "name robot:interlock.reset=(NAME) takes)")
         ok = False
+    elif name.lower() in RESERVED_NAMES:
+        err(f"{path}.name", at("name"), f"{name} is reserved (robot:interlock.active=(none) "
+                                        "says no rule is active); choose another name")
+        ok = False
     elif name in seen:
         err(f"{path}.name", at("name"), f"{name} is already the name of {seen[name]}; names "
                                         "are unique")
@@ -172,10 +196,52 @@ def _rule(entry: LinedMap, path: str, tables: _Tables, err: Err, modules_ok: boo
     if not isinstance(latch, bool):
         err(f"{path}.latch", at("latch"), f"{shorten(repr(latch))} is not true or false")
         ok = False
+    severity = entry.get("severity", "warning")
+    if severity not in SEVERITIES:
+        err(f"{path}.severity", at("severity"), f"{shorten(repr(severity))} is not a "
+            "severity; expected info (shapes normal work: shown, not an alert), warning "
+            "(the default) or error")
+        ok = False
+    message = entry.get("message", "")
+    if not isinstance(message, str):
+        err(f"{path}.message", at("message"), f"expected the operator's advice as text, got "
+                                              f"{kind_of(message)}")
+        ok = False
+    else:
+        message = message.strip()
+        if message and (len(message) > MAX_MESSAGE or not _MESSAGE.match(message)):
+            err(f"{path}.message", at("message"),
+                f"{shorten(repr(message), 60)}: a message is one line of at most "
+                f"{MAX_MESSAGE} printable ASCII characters without , ( or ) (it travels in "
+                "MCP values)")
+            ok = False
     if not ok or when is None or patterns is None:
         return None
     assert isinstance(name, str)
-    return RuleSpec(name, when, action, patterns, latch, entry.line)
+    return RuleSpec(name, when, action, tuple((p, n) for p, n, _ in patterns), latch,
+                    entry.line, str(severity), message,
+                    tuple(d for _, _, d in patterns) if any(d for *_, d in patterns) else ())
+
+
+def explain(rules: tuple[RuleSpec, ...], modules: Mapping[str, Any]) -> list[str]:
+    """`ramp check --explain`: per rule, what it reads and every function each entry covers
+    (the actuator, not the spelling: SPEC 11), as lines of text."""
+    tables = _Tables(modules)
+    built = tables.all()
+    out: list[str] = []
+    for spec in rules:
+        extra = ", latched" if spec.latch else ""
+        out.append(f"{spec.name} ({spec.severity}{extra}): {spec.action} while {spec.when}")
+        if spec.message:
+            out.append(f"  message: {spec.message}")
+        directions = spec.directions or (0,) * len(spec.patterns)
+        for (pattern, n), d in zip(spec.patterns, directions, strict=True):
+            functions, _ = covered(pattern, built)
+            how = (f" to {n} %" if n is not None else "") + (
+                " (forward only)" if d > 0 else " (reverse only)" if d < 0 else "")
+            names = ", ".join(f"{m}:{f.device}.{f.name}" for m, f in functions)
+            out.append(f"  {pattern}{how} covers {names or 'nothing'}")
+    return out
 
 
 def _item_line(items: Any, i: int, default: int) -> int:
@@ -230,8 +296,17 @@ def _property_problem(prop: str, tables: _Tables) -> str:
 
 
 def _patterns(raw: Any, key: str, line: int, action: str, tables: _Tables, err: Err,
-              modules_ok: bool) -> tuple[tuple[str, int | None], ...] | None:
+              modules_ok: bool) -> tuple[tuple[str, int | None, int], ...] | None:
+    """(pattern, limit or None, direction: 0, +1 forward or -1 reverse) per entry."""
     items: list[tuple[Any, Any]]
+    if action != "limit" and isinstance(raw, dict) and raw:  # {PATTERN: forward|reverse}
+        raw_map = raw
+        raw = LinedList(line)
+        for p, d in raw_map.items():
+            entry = LinedMap(raw_map.line_of(p) if isinstance(raw_map, LinedMap) else line)
+            entry[p] = d
+            raw.append(entry)
+            raw.lines.append(entry.line)
     if action == "limit":
         if not isinstance(raw, dict) or not raw:
             err(key, line, f"expected a mapping of patterns to a speed limit in % "
@@ -243,14 +318,23 @@ def _patterns(raw: Any, key: str, line: int, action: str, tables: _Tables, err: 
             raw = [raw]
         if not isinstance(raw, list) or not raw:
             err(key, line, f"expected a list of patterns MODULE:DEVICE.FUNCTION "
-                           f"([\"ble:chain.vel\"]), got "
+                           f"([\"ble:chain.vel\"], an entry may be {{PATTERN: forward}}), got "
                            f"{'an empty list' if raw == [] else kind_of(raw)}")
             return None
         items = [(p, None) for p in raw]
-    out: list[tuple[str, int | None]] = []
+    out: list[tuple[str, int | None, int]] = []
     ok = True
     for i, (pattern, n) in enumerate(items):
         here = raw.line_of(pattern) if isinstance(raw, LinedMap) else _item_line(raw, i, line)
+        direction = 0
+        if action != "limit" and isinstance(pattern, dict):
+            if len(pattern) != 1 or next(iter(pattern.values())) not in DIRECTIONS:
+                err(key, here, f"{shorten(repr(dict(pattern)))}: a one-direction entry is "
+                               "{PATTERN: forward} or {PATTERN: reverse}")
+                ok = False
+                continue
+            pattern, way = next(iter(pattern.items()))
+            direction = DIRECTIONS[way]
         if action == "limit" and (not isinstance(n, int) or isinstance(n, bool)
                                   or not 0 <= n <= 100):
             err(key, here,
@@ -263,7 +347,7 @@ def _patterns(raw: Any, key: str, line: int, action: str, tables: _Tables, err: 
             err(key, here, problem)
             ok = False
             continue
-        out.append((pattern, n))
+        out.append((pattern, n, direction))
     return tuple(out) if ok else None
 
 

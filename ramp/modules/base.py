@@ -39,6 +39,7 @@ from ramp.api import (
     Value,
     Voltage,
     VoltageDisplay,
+    mix,
 )
 
 WHEELS = ("lf_wheel", "lb_wheel", "rf_wheel", "rb_wheel")
@@ -82,7 +83,8 @@ class BaseModule(Module):
 
         speed = IntParam(-100, 100)
         self.add(Function(name, "drive", (speed, FloatParam()), self._drive,
-                          "motion", "drive at a speed % in a direction in degrees"))
+                          "motion", "drive at a speed % in a direction in degrees",
+                          moves=WHEELS, senses=drive_senses))
         for w in WHEELS:
             self.add(Function(w, "vel", (speed,), motors[w].set_velocity, "motion",
                               "one wheel's velocity in %"))
@@ -134,3 +136,13 @@ def _reader(m: Motor) -> Callable[[], Value]:
 
 def _pressed(b: Button) -> Callable[[], Value]:
     return lambda: int(b.pressed)
+
+
+def drive_senses(speed: int, direction: float) -> tuple[int, int, int, int]:
+    """Which way `drive=(speed,direction)` turns lf, lb, rf, rb (+1 forward, -1 reverse, 0
+    still; a wheel's side mix under half a % rounds to 0): what an interlock that forbids
+    one direction reads (SPEC 11). A spin turns one side each way."""
+    left, right = mix(speed, direction)
+    sl = 0 if abs(left) < 0.5 else (1 if left > 0 else -1)
+    sr = 0 if abs(right) < 0.5 else (1 if right > 0 else -1)
+    return (sl, sl, sr, sr)

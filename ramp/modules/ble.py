@@ -11,6 +11,7 @@ default 0.03), `hysteresis` (a move stops this close to its target, default 0.01
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
@@ -64,11 +65,11 @@ class BleModule(Module):
         self.add(Function("lift", "vel", (speed,), self.lift.vel, "motion",
                           "lift velocity in %; + extends"))
         self.add(Function("lift", "extend", (), self.lift.extend, "motion",
-                          "extend at full speed to the end"))
+                          "extend at full speed to the end", senses=lambda: (1,)))
         self.add(Function("lift", "retract", (), self.lift.retract, "motion",
-                          "retract at full speed to the end"))
+                          "retract at full speed to the end", senses=lambda: (-1,)))
         self.add(Function("lift", "pos", (FloatParam(0.0, 1.0),), self.lift.move_to, "motion",
-                          "move to a position and hold it"))
+                          "move to a position and hold it", senses=self._pos_sense))
         self.add(Function("chain", "vel", (speed,), self.chain.vel, "motion",
                           "bucket ladder chain velocity in %"))
         self.add(Function("load", "tare", (), self.load.tare, "state",
@@ -79,6 +80,14 @@ class BleModule(Module):
         self.prop(Property("chain", "vel", "int", lambda: self.chain.velocity))
         self.prop(Property("load", "kg", "float", lambda: self.load.kg, "kg"))
         self.latched("lift", self.lift.latch, "stalled")
+
+    def _pos_sense(self, target: float) -> tuple[int] | None:
+        """`lift.pos` extends (+1) toward a target above the position, retracts (-1) toward
+        one below; with the position unread, either (None)."""
+        pos = self.lift.position
+        if not math.isfinite(pos):
+            return None
+        return (1 if target > pos else -1 if target < pos else 0,)
 
     def stop(self) -> None:
         """Lift and chain to 0, any move cancelled (a latched lift stall stays latched)."""

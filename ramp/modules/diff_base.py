@@ -66,7 +66,8 @@ class DiffBaseModule(Module):
 
         speed = IntParam(-100, 100)
         self.add(Function(name, "drive", (speed, FloatParam()), self._drive, "motion",
-                          "drive at a speed % in a direction in degrees"))
+                          "drive at a speed % in a direction in degrees",
+                          moves=WHEELS, senses=drive_senses))
         for w in WHEELS:
             self.add(Function(w, "vel", (speed,), self.wheels[w].set_velocity, "motion",
                               "one wheel's velocity in %"))
@@ -102,3 +103,12 @@ class DiffBaseModule(Module):
     def _bumpers_tick(self, now: float, dt: float) -> None:
         for b in self.bumpers.values():
             b.tick(now)
+
+
+def drive_senses(speed: int, direction: float) -> tuple[int, int]:
+    """Which way `drive=(speed,direction)` turns the left and right wheel (+1 forward, -1
+    reverse, 0 still): what an interlock that forbids one direction reads (SPEC 11), so
+    Scout can back away from a pressed bumper. A spin turns one wheel each way."""
+    left, right = mix(speed, direction)
+    return (0 if abs(left) < 0.5 else (1 if left > 0 else -1),
+            0 if abs(right) < 0.5 else (1 if right > 0 else -1))

@@ -97,7 +97,8 @@ interlocks:
     assert "limits is already the name of interlocks[2]" in text
     assert "expected exactly one action" in text and "(given: refuse, stop)" in text
     assert "expected a condition as text (quote it), got an integer" in text
-    assert "unknown key (expected: name, when, refuse, stop, limit, latch)" in text
+    assert "unknown key (expected: name, when, refuse, stop, limit, latch, severity, " \
+           "message)" in text
 
 
 def test_a_section_that_is_not_a_list_of_rules_is_an_error() -> None:

@@ -107,7 +107,7 @@ class ArmModule(Module):
         self.add(Function("gripper", "close", (FlagParam(),), self._grip, "motion",
                           "close (1) or open (0) the gripper"))
         self.add(Function(name, "stow", (), self.stow, "motion",
-                          "every joint to its stowed angle"))
+                          "every joint to its stowed angle", moves=JOINTS))
         for j, joint in self.joints.items():
             self.prop(Property(j, "pos", "float", _reader(joint, "pos"), "deg"))
             self.prop(Property(j, "target", "float", _reader(joint, "target"), "deg"))

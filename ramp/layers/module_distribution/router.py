@@ -35,8 +35,8 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar, Literal
 
 from ramp.errors import ConfigError, RequestError
@@ -67,6 +67,16 @@ class Function:
     takes_context: bool = False
     #: For reads: the answer written straight to the wire, given the state's version.
     line: Callable[[Version], bytes] | None = None
+    #: For a motion function on the module's own device (`base.drive`): the devices it moves
+    #: (the four wheels), so an interlock on any of them covers it (SPEC 11). Left empty, a
+    #: function moves its own device, and a module-level one every device of the module
+    #: that has motion (the safe guess).
+    moves: tuple[str, ...] = ()
+    #: The direction each device of `moves` (or the function's own device) would run with
+    #: the request's parameters: +1 forward, -1 reverse, 0 not at all, for interlocks that
+    #: forbid one direction (SPEC 11); it answers None when it cannot tell. Left None: the
+    #: sign of a speed first parameter, else unknown (such a rule refuses it either way).
+    senses: Callable[..., Sequence[int] | None] | None = None
 
 
 @dataclass(frozen=True)
@@ -116,8 +126,7 @@ def _refused_while_latched(fn: Function, latch: Any) -> Function:
                                         f"{latch.label}.reset")
         return run(*args)
 
-    return Function(fn.device, fn.name, fn.params, guarded, fn.kind, fn.help,
-                    fn.takes_context, fn.line)
+    return replace(fn, run=guarded)
 
 
 def answer(responses: list[Response] | None) -> bytes:

@@ -12,13 +12,42 @@ action on motion functions named by patterns (`MODULE:DEVICE.FUNCTION`, `*` with
   would run at a speed the rule forbids. `ramp.config` refuses a limit pattern that names
   only such functions.
 
+**What a rule covers: the actuator, not the spelling.** A pattern names motion functions;
+the rule covers every device those functions move, and so every motion function that moves
+one of those devices: `ble:lift.vel` covers `lift.extend`, `lift.retract` and `lift.pos`;
+`base:lf_wheel.vel` covers `base.drive`, which moves that wheel; `base:base.drive` covers
+the four `wheel.vel`. A function's devices are its `Function.moves` (a module-level function
+that declares none moves every device of its module that has motion: the safe guess), else
+its own device. `covered` works this out once, for the running rules and `ramp check
+--explain` alike.
+
+**Direction.** A `refuse` or `stop` entry may forbid one direction only (`{"base:*":
+forward}`): a request is refused when it would run a covered device that way, as the
+function's `Function.senses` tells (the sign of the speed for a one-device speed function;
+for `base.drive`, the sign of each wheel's share of the mix), and one whose direction
+cannot be told is refused either way. When such a rule becomes active, a covered device
+that runs that way (its speed reading's sign) is stopped; one running the other way keeps
+running, so Scout can back away from a pressed bumper.
+
 **When rules are evaluated.** Every tick, after the buses sampled their inputs and before any
 module's own work (`tick`), and again for the rules guarding a motion request as it arrives
-(`permit`), since a request earlier in the same message may have changed a reading. The
-cost is one read per property the rules use (once, however many rules read it) and one
-closure call per comparison, and nothing more for a rule that does not hold: it grows with
-the rules and nothing else. The reads are the modules' own get properties (`Property.read`),
-the values a get answer is formatted from, never a formatted answer.
+(`permit`), since a request earlier in the same message may have changed a reading. A tick
+reads each property the rules use once (however many rules read it) and evaluates only the
+rules that are active or read a property whose value changed since the tick before: a rule
+that did not hold on the same values cannot hold now. Its cost is the reads, and the rules
+touched by a change; 480 rules over readings that do not move cost the reads alone. The
+reads are the modules' own get properties (`Property.read`), the values a get answer is
+formatted from, never a formatted answer.
+
+**A limit never brings motion back.** A limit lowers motion that runs now: a speed read on
+the device, or the last request of a module-level function (`base.drive`, whose direction
+the limit keeps), which is forgotten at every stop (a module's stop, a robot-wide stop, a
+takeover, a watchdog trip, a rule's stop) and is re-run only while the module is moving.
+
+**Severity** (`info`, `warning`, `error`) and a rule's own `message` are published by
+`describe` for the console. An `info` rule shapes normal work: its activations and releases
+are logged at DEBUG (the flight recorder still records each; `ramp log summary` counts
+them per rule).
 
 **Release.** A rule becomes active in the tick (or request) its condition is seen true, and
 is released once the condition has been clear for `RELEASE_AFTER_S` (0.1 s): a reading that
@@ -60,6 +89,14 @@ RULE_NAME = re.compile(r"[A-Za-z0-9_-]{1,32}\Z")
 PATTERN = re.compile(
     r"([A-Za-z0-9_*]{1,32}):(?:([A-Za-z0-9_*]{1,32})\.([A-Za-z0-9_*]{1,32})|\*)\Z")
 PROPERTY = re.compile(r"([A-Za-z0-9_]{1,32}):([A-Za-z0-9_]{1,32})\.([A-Za-z0-9_]{1,32})\Z")
+#: Names a rule may not take: `robot:interlock.active=(none)` means no rule is active.
+RESERVED_NAMES = ("none",)
+SEVERITIES = ("info", "warning", "error")
+#: `{PATTERN: forward|reverse}`: the sign of the motion a directional entry forbids.
+DIRECTIONS = {"forward": 1, "reverse": -1}
+#: The most rules a robot may have: far past any real robot's (MARTE has 4), a bound on
+#: what one request and one tick can cost.
+MAX_RULES = 1000
 
 #: Observer hook: (rule name, active, why, clock time) at every activation and release.
 InterlockHook = Callable[[str, bool, str, float], None]
@@ -76,6 +113,13 @@ class RuleSpec:
     patterns: tuple[tuple[str, int | None], ...]
     latch: bool = False
     line: int = 0
+    severity: str = "warning"
+    #: The operator's advice shown with the alert (no `,` `)` or line end: it travels in MCP
+    #: values); "" when the rule has none.
+    message: str = ""
+    #: Per pattern: 0 any motion, +1 forward only, -1 reverse only (`refuse`/`stop` maps);
+    #: empty: all 0.
+    directions: tuple[int, ...] = ()
 
 
 # -- what the tables offer (shared with the config check) -----------------------------------
@@ -107,6 +151,49 @@ def motion_matches(pattern: str, modules: Mapping[str, Module]) -> list[tuple[st
     return out
 
 
+def moved_devices(module: Module, fn: Function) -> tuple[str, ...]:
+    """The devices a motion function moves (see the module docstring)."""
+    if fn.moves:
+        return fn.moves
+    if fn.device != module.name:
+        return (fn.device,)
+    others = sorted({f.device for f in module.functions.values()
+                     if f.kind == "motion" and f.device != module.name})
+    return tuple(others) or (fn.device,)
+
+
+def covered(pattern: str, modules: Mapping[str, Module]
+            ) -> tuple[list[tuple[str, Function]], dict[str, tuple[str, ...]]]:
+    """What a pattern covers: every (module, motion function) that moves a device some
+    function the pattern names moves, in table order, and per module those devices."""
+    devices: dict[str, dict[str, None]] = {}
+    for mod, fn in motion_matches(pattern, modules):
+        devices.setdefault(mod, {}).update(dict.fromkeys(moved_devices(modules[mod], fn)))
+    out: list[tuple[str, Function]] = []
+    for mod, devs in devices.items():
+        out.extend((mod, fn) for fn in modules[mod].functions.values()
+                   if fn.kind == "motion" and any(d in devs for d in
+                                                  moved_devices(modules[mod], fn)))
+    return out, {mod: tuple(devs) for mod, devs in devices.items()}
+
+
+def senses_of(module: Module, fn: Function, values: Sequence[Any]) -> Sequence[int] | None:
+    """Which way each device of `moved_devices(module, fn)` would run for `values` (+1, -1,
+    0), or None when that cannot be told (the rule then refuses either way)."""
+    if fn.senses is not None:
+        try:
+            got = fn.senses(*values)
+        except Exception:  # plugin code: a direction we cannot tell
+            return None
+        if got is None or len(got) != len(moved_devices(module, fn)):
+            return None
+        return got
+    if speed_param(fn) is not None and len(moved_devices(module, fn)) == 1:
+        v = values[0]
+        return ((v > 0) - (v < 0),)
+    return None
+
+
 def find_property(module: Module, device: str, name: str) -> Property | None:
     for p in module.properties:
         if p.device == device and p.name == name:
@@ -130,14 +217,16 @@ def _neutral(p: Param) -> Any:
 # -- the running rules ----------------------------------------------------------------------
 
 #: What a guard does to a request while its rule is active: refuse it, refuse it unless its
-#: speed is 0 (a stop), or clamp its speed.
-REFUSE, ZERO_ONLY, LIMIT = 0, 1, 2
+#: speed is 0 (a stop), clamp its speed, or refuse it when it runs a device one way.
+REFUSE, ZERO_ONLY, LIMIT, DIRECTION = 0, 1, 2, 3
 #: A rule is released once its condition has been clear this long (s): ten ticks at 100 Hz.
 RELEASE_AFTER_S = 0.1
 #: `Rule.evaluate`'s answers besides an unreadable property's index.
 HOLDS, CLEAR = -1, -2
 #: What a refusal says of a latched rule whose condition has cleared.
 LATCHED = "is latched until robot:interlock.reset"
+#: A value no reading is: every property counts as changed at the first tick.
+_UNSEEN: Any = object()
 
 
 @dataclass
@@ -153,13 +242,39 @@ class _Limit:
     reading: Callable[[], Any] | None
 
 
+@dataclass
+class _Stop:
+    """One device a refuse/stop rule stops when it becomes active."""
+
+    slot: Any
+    device: str
+    #: 0: stop it; +1/-1: stop it only while its `reading` says it runs that way.
+    sign: int
+    reading: Callable[[], Any] | None
+
+
+@dataclass(frozen=True)
+class _Guard:
+    """What one rule does to requests of one function."""
+
+    rule: Rule
+    effect: int
+    lo: int = 0
+    hi: int = 0
+    #: DIRECTION: the sign forbidden, and the indices (in `moved_devices`) of the covered
+    #: devices it is forbidden on.
+    sign: int = 0
+    which: tuple[int, ...] = ()
+
+
 class Rule:
     """One rule as it runs: its reads, its predicate, its state and what it acts on."""
 
     def __init__(self, spec: RuleSpec, index: tuple[int, ...],
-                 predicate: Callable[[Sequence[float]], bool]) -> None:
+                 predicate: Callable[[Sequence[float]], bool], order: int) -> None:
         self.spec = spec
         self.name = spec.name
+        self.order = order
         #: Where the rule's properties sit in `Interlocks.values`.
         self.index = index
         self.predicate = predicate
@@ -170,11 +285,14 @@ class Rule:
         self.why = ""
         #: Clock time since which the condition has been clear (None while it holds).
         self.clear_since: float | None = None
-        #: Devices stopped when the rule becomes active: (slot, device).
-        self.stops: list[tuple[Any, str]] = []
+        self.stops: list[_Stop] = []
         self.limits: list[_Limit] = []
         #: Every function the rule guards (a limit leaves motion of other functions alone).
         self.functions: set[int] = set()
+        #: Times the rule became active (for a summary line: an `info` rule logs at DEBUG).
+        self.activations = 0
+        #: Times the predicate ran (the tick skips rules whose readings did not change).
+        self.evaluations = 0
 
     def evaluate(self, values: list[Any]) -> int:
         """HOLDS, CLEAR, or the index of a property that cannot be read (fail closed: the
@@ -182,6 +300,7 @@ class Rule:
         for i in self.index:
             if values[i] is None:
                 return i
+        self.evaluations += 1
         return HOLDS if self.predicate(values) else CLEAR
 
     def refusal(self) -> str:
@@ -199,13 +318,20 @@ class Interlocks:
         #: (None: unreadable). A tick reads each once, however many rules use it.
         self.props: list[tuple[str, Any, Callable[[], Any]]] = []
         self.values: list[Any] = []
+        #: The values the last tick evaluated its rules on, and per property the rules
+        #: reading it: a tick evaluates only what a change touches.
+        self._ticked: list[Any] = []
+        self._readers: list[list[Rule]] = []
         self._prop_index: dict[str, int] = {}
         #: Per guarded function: the properties its rules read.
         self._guard_props: dict[tuple[str, str, str], tuple[int, ...]] = {}
-        #: (module, device, function) -> [(rule, REFUSE, ZERO_ONLY or LIMIT, lo, hi)]
-        self.guards: dict[tuple[str, str, str], list[tuple[Rule, int, int, int]]] = {}
+        #: (module, device, function) -> what each rule covering it does
+        self.guards: dict[tuple[str, str, str], list[_Guard]] = {}
+        #: Rules active now, by `Rule.order` (evaluated every tick: release timing, limits).
+        self._active: dict[int, Rule] = {}
         #: Per module with a limit: the last motion function per device, and the last motion
-        #: request's parameters (valid until another request on the module), see `ran`.
+        #: request's parameters (valid until a stop or another request on the module), see
+        #: `ran` and `forget`.
         self._last_fn: dict[str, dict[str, Function]] = {}
         self._last_args: dict[str, tuple[Function, list[Any]] | None] = {}
         self._zero: dict[tuple[str, str], tuple[Function, tuple[Any, ...]] | None] = {}
@@ -218,8 +344,13 @@ class Interlocks:
         for spec in specs:
             self._bind(spec, modules)
         for key, guards in self.guards.items():
-            self._guard_props[key] = tuple(sorted({i for rule, *_ in guards for i in rule.index}))
+            self._guard_props[key] = tuple(sorted({i for g in guards for i in g.rule.index}))
         self._all = tuple(range(len(self.props)))
+        self._ticked = [_UNSEEN] * len(self.props)
+        self._readers = [[] for _ in self.props]
+        for rule in self.rules:
+            for i in set(rule.index):
+                self._readers[i].append(rule)
         self._remembering = [(name, slot) for name, slot in slots.items()
                              if name in self._last_args]
 
@@ -237,17 +368,28 @@ class Interlocks:
             self.values.append(None)
         index = self._prop_index
         rule = Rule(spec, tuple(index[p] for p in properties(spec.when)),
-                    compile_condition(spec.when, index))
-        stop_devices: dict[tuple[str, str], None] = {}
-        for pattern, n in spec.patterns:
-            for mod, fn in motion_matches(pattern, modules):
+                    compile_condition(spec.when, index), len(self.rules))
+        stop_devices: dict[tuple[str, str], int] = {}
+        directions = spec.directions or (0,) * len(spec.patterns)
+        for (pattern, n), sign in zip(spec.patterns, directions, strict=True):
+            functions, devices = covered(pattern, modules)
+            for mod, fn in functions:
                 rule.functions.add(id(fn))
                 key = (mod, fn.device, fn.name)
                 sp = speed_param(fn) if spec.action == "limit" else None
                 if spec.action == "limit" and sp is not None:
                     assert n is not None
                     lo, hi = max(sp.lo, -n), min(sp.hi, n)
-                    self.guards.setdefault(key, []).append((rule, LIMIT, lo, hi))
+                    guards = self.guards.setdefault(key, [])
+                    mine = [k for k, g in enumerate(guards) if g.rule is rule]
+                    if mine:  # covered by two of the rule's entries: the tighter holds
+                        g = guards[mine[0]]
+                        guards[mine[0]] = _Guard(rule, LIMIT, max(lo, g.lo), min(hi, g.hi))
+                        for lim in rule.limits:
+                            if lim.fn is fn:
+                                lim.lo, lim.hi = max(lo, lim.lo), min(hi, lim.hi)
+                        continue
+                    guards.append(_Guard(rule, LIMIT, lo, hi))
                     reading = None
                     if len(fn.params) == 1:
                         prop_row = find_property(modules[mod], fn.device, fn.name)
@@ -255,39 +397,61 @@ class Interlocks:
                     rule.limits.append(_Limit(self.slots[mod], fn, lo, hi, reading))
                     self._last_fn.setdefault(mod, {})
                     self._last_args.setdefault(mod, None)
+                elif sign:
+                    moved = moved_devices(modules[mod], fn)
+                    which = tuple(k for k, d in enumerate(moved) if d in devices[mod])
+                    self.guards.setdefault(key, []).append(
+                        _Guard(rule, DIRECTION, sign=sign, which=which))
                 else:
                     # A zero speed is a stop, and stops are never refused.
                     effect = ZERO_ONLY if speed_param(fn) is not None else REFUSE
-                    self.guards.setdefault(key, []).append((rule, effect, 0, 0))
-                    stop_devices[(mod, fn.device)] = None
-        for mod, device in stop_devices:
-            rule.stops.append((self.slots[mod], device))
-            self._zero.setdefault((mod, device), _zero_of(modules[mod], device))
+                    guards = self.guards.setdefault(key, [])
+                    if not any(g.rule is rule and g.effect == effect for g in guards):
+                        guards.append(_Guard(rule, effect))
+            if spec.action != "limit":
+                for mod, devs in devices.items():
+                    for device in devs:
+                        # Any entry stopping a device outright wins over a directional one.
+                        k = (mod, device)
+                        stop_devices[k] = 0 if stop_devices.get(k, sign) == 0 else sign
+        # A module-level function re-run by a limit goes first: it keeps its direction.
+        rule.limits.sort(key=lambda lim: lim.reading is not None)
+        for (mod, device), sign in stop_devices.items():
+            zero = _zero_of(modules[mod], device)
+            self._zero.setdefault((mod, device), zero)
+            reading = None
+            if sign and zero is not None:
+                row = find_property(modules[mod], device, zero[0].name)
+                reading = row.read if row is not None else None
+            rule.stops.append(_Stop(self.slots[mod], device, sign, reading))
         self.rules.append(rule)
         self.by_name[rule.name] = rule
 
     # -- the tick -----------------------------------------------------------------------------
     def tick(self, now: float, dt: float) -> None:
-        """Scheduler task, before module work: every rule evaluated, limits enforced."""
+        """Scheduler task, before module work: the rules whose readings changed (and the
+        active ones) evaluated, limits enforced."""
+        for name, slot in self._remembering:  # before the rules: a limit reads it
+            if self._last_args[name] is not None \
+                    and not (slot.state == "ok" and slot.module.is_moving()):
+                self._last_args[name] = None
         self.read(self._all)
-        values = self.values
+        values, ticked, readers = self.values, self._ticked, self._readers
+        todo = dict(self._active)
+        for i, v in enumerate(values):
+            if v != ticked[i]:
+                ticked[i] = v
+                for rule in readers[i]:
+                    todo[rule.order] = rule
         changed = False
-        for rule in self.rules:
-            for i in rule.index:  # Rule.evaluate, inline: this loop is the tick's cost
-                if values[i] is None:
-                    verdict = i
-                    break
-            else:
-                verdict = HOLDS if rule.predicate(values) else CLEAR
+        for order in sorted(todo) if len(todo) > 1 else todo:
+            rule = todo[order]
+            verdict = rule.evaluate(values)
             if verdict == CLEAR and not rule.active:
                 continue  # the common case: nothing to do
             changed |= self.apply(rule, verdict, now)
             if rule.active and rule.limits:
                 changed |= self._bring_down(rule)
-        for name, slot in self._remembering:
-            if self._last_args[name] is not None \
-                    and not (slot.state == "ok" and slot.module.is_moving()):
-                self._last_args[name] = None
         if changed and self.on_motion_changed is not None:
             self.on_motion_changed(now)
 
@@ -339,23 +503,37 @@ class Interlocks:
                         else "is active" if holds or not rule.latched else LATCHED)
         if active == was:
             return False
+        info = rule.spec.severity == "info"
         if not active:
+            del self._active[rule.order]
             rule.why = ""
             rule.seen_true = False
-            log.info("interlock %s released", rule.name)
+            log.log(logging.DEBUG if info else logging.INFO, "interlock %s released",
+                    rule.name)
             self._tell(rule, False, "released", now)
             return False
+        self._active[rule.order] = rule
+        rule.activations += 1
         if unreadable:
             what = f"active (fail closed): {unreadable} cannot be read"
         else:
             what = f"active: {rule.spec.when}"
             if rule.spec.latch:
                 what += f" (latched until robot:interlock.reset=({rule.name}))"
-        # A limit engaging is the rule working as designed (slow while digging): a note. A
+        # An `info` rule is normal work (MARTE's digging creep): DEBUG, counted by the
+        # recorder's summary. A limit engaging is the rule working as designed: a note. A
         # refusal, a stop or a latch, or any rule failing closed, is worth a warning.
-        routine = rule.spec.action == "limit" and not rule.spec.latch and not unreadable
-        log.log(logging.INFO if routine else logging.WARNING, "interlock %s %s", rule.name,
-                what)
+        if unreadable:
+            level = logging.WARNING if rule.spec.severity != "error" else logging.ERROR
+        elif info:
+            level = logging.DEBUG
+        elif rule.spec.severity == "error":
+            level = logging.ERROR
+        elif rule.spec.action == "limit" and not rule.spec.latch:
+            level = logging.INFO
+        else:
+            level = logging.WARNING
+        log.log(level, "interlock %s %s", rule.name, what)
         self._tell(rule, True, what, now)
         return self._stop_devices(rule)
 
@@ -365,10 +543,19 @@ class Interlocks:
 
     def _stop_devices(self, rule: Rule) -> bool:
         stopped = False
-        for slot, device in rule.stops:
+        for stop in rule.stops:
+            slot, device = stop.slot, stop.device
             if slot.state != "ok":
                 continue  # its motion is already stopped
+            if stop.sign and stop.reading is not None:
+                try:
+                    v = stop.reading()
+                except Exception:
+                    v = None
+                if isinstance(v, int | float) and v == v and v * stop.sign <= 0:
+                    continue  # still, or running the way the rule allows
             zero = self._zero.get((slot.name, device))
+            self.forget(slot.name)
             try:
                 if zero is not None:
                     zero[0].run(*zero[1])
@@ -385,7 +572,8 @@ class Interlocks:
         return stopped
 
     def _bring_down(self, rule: Rule) -> bool:
-        """Motion of the rule's speed functions already outside +-n: run at the limit."""
+        """Motion of the rule's speed functions running now outside +-n: run at the limit.
+        Never starts anything (see the module docstring)."""
         changed = False
         for lim in rule.limits:
             slot = lim.slot
@@ -410,16 +598,25 @@ class Interlocks:
                 args = list(remembered[1])
                 if lim.lo <= args[0] <= lim.hi:
                     continue
+                try:
+                    moving = slot.module.is_moving()
+                except Exception:
+                    moving = True  # re-running at the limit is slower than what was asked
+                if not moving:  # stopped by a path that did not tell us: nothing runs now
+                    self._last_args[slot.name] = None
+                    continue
                 args[0] = min(max(args[0], lim.lo), lim.hi)
             try:
                 fn.run(*args)
             except Exception:
                 log.exception("interlock %s: slowing %s:%s.%s failed; stopping module %s",
                               rule.name, slot.name, fn.device, fn.name, slot.name)
+                self.forget(slot.name)
                 slot.module.stop()
                 continue
-            log.info("interlock %s: %s:%s.%s brought down to %s", rule.name, slot.name,
-                     fn.device, fn.name, args[0])
+            log.log(logging.DEBUG if rule.spec.severity == "info" else logging.INFO,
+                    "interlock %s: %s:%s.%s brought down to %s", rule.name, slot.name,
+                    fn.device, fn.name, args[0])
             self.ran(slot.name, fn, args)
             changed = True
         return changed
@@ -436,17 +633,16 @@ class Interlocks:
         readings = self.values
         refusal = None
         stopped = False
-        for rule, effect, lo, hi in guards:
-            for i in rule.index:  # Rule.evaluate, inline (as in `tick`)
-                if readings[i] is None:
-                    verdict = i
-                    break
-            else:
-                verdict = HOLDS if rule.predicate(readings) else CLEAR
+        senses: Sequence[int] | None = None
+        told = False  # `senses` worked out (once per request, when a guard needs it)
+        for g in guards:
+            rule = g.rule
+            verdict = rule.evaluate(readings)
             if verdict != CLEAR or rule.active:
                 stopped |= self.apply(rule, verdict, now)
             if not rule.active:
                 continue
+            effect = g.effect
             if effect == ZERO_ONLY:
                 if refusal is None and values[0] != 0:
                     refusal = rule.refusal()
@@ -454,8 +650,17 @@ class Interlocks:
                 if refusal is None:
                     refusal = rule.refusal() if rule.spec.action != "limit" else (
                         f"{rule.name} limits {module}:{fn.device} and {fn.name} has no speed")
+            elif effect == DIRECTION:
+                if refusal is not None or (speed_param(fn) is not None and values[0] == 0):
+                    continue  # a zero speed is a stop
+                if not told:
+                    senses, told = senses_of(self.slots[module].module, fn, values), True
+                if senses is None or any(
+                        senses[k] == g.sign for k in g.which):
+                    way = "forward" if g.sign > 0 else "reverse"
+                    refusal = f"{rule.refusal()} ({way} motion refused)"
             else:
-                values[0] = min(max(values[0], lo), hi)
+                values[0] = min(max(values[0], g.lo), g.hi)
         if stopped and self.on_motion_changed is not None:
             self.on_motion_changed(now)
         return refusal
@@ -472,14 +677,21 @@ class Interlocks:
             last[fn.device] = fn
             self._last_args[module] = (fn, list(values))
         else:
+            self.forget(module)
+
+    def forget(self, module: str) -> None:
+        """`module` stopped (all or part of it): no request of it is remembered as running,
+        so a limit can never re-run it."""
+        last = self._last_fn.get(module)
+        if last is not None:
             last.clear()
             self._last_args[module] = None
 
     def stopped_all(self) -> None:
-        """`robot.stop` and every other robot-wide stop: nothing is remembered as running."""
-        for module, last in self._last_fn.items():
-            last.clear()
-            self._last_args[module] = None
+        """`robot.stop` and every other robot-wide stop (a takeover, a watchdog trip, a
+        stall, a lost commander): nothing is remembered as running."""
+        for module in self._last_fn:
+            self.forget(module)
 
     def reset(self, name: str, now: float) -> str | None:
         """`robot:interlock.reset=(NAME)`: None when done (or nothing to do), else why not."""

@@ -107,8 +107,11 @@ class RobotRequests(Module):
 
     def describe(self) -> list[Response]:
         out = [Response("robot", "robot", "module", (name,)) for name in self.layer.slots]
-        out.extend(Response("robot", "interlock", "rule", (rule.name,))
-                   for rule in self.layer.interlocks.rules)
+        for rule in self.layer.interlocks.rules:  # SPEC 11: the console's alerts come from these
+            out.append(Response("robot", "interlock", "rule", (rule.name, rule.spec.severity)))
+            if rule.spec.message:
+                out.append(Response("robot", "interlock", "message",
+                                    (rule.name, rule.spec.message)))
         for fn in self.functions.values():
             out.append(Response("robot", fn.device, "function",
                                 (fn.name, *(p.describe() for p in fn.params))))
@@ -212,6 +215,7 @@ class RobotDistribution:
             log.exception("request %s:%s.%s failed", req.module, req.device, req.function)
             if kind == "motion":  # it may have started some motors with the watchdog idle
                 self._stop(target, "a failed motion request")
+                interlocks.forget(module)
             return _error(req, "fault", f"internal error {type(exc).__name__}")
         if interlocks.rules and (kind == "motion" or kind == "stop"):
             interlocks.ran(module, fn, values)
@@ -350,6 +354,7 @@ class RobotDistribution:
     def _stop_keep_trip(self, reason: str) -> None:
         """Every attached module stops; the watchdog state is left to the caller."""
         self.changes += 1
+        self.interlocks.stopped_all()  # a limit never re-runs what this stops
         for slot in self.slots.values():
             if slot.state == "ok":
                 self._stop(slot.module, reason)
