@@ -375,7 +375,7 @@ def test_marte_tables_survive_anything(marte: SimHarness, data: st.DataObject) -
             kind = types.get((r.module, r.device, r.prop))
             if kind is None:  # describe and robot.modules rows; every get row is described
                 assert r.prop in ("function", "property", "module", "modules", "kind",
-                                  "rule"), r
+                                  "rule", "message"), r
             if r.prop == "kind":  # a function's kind: a function describe lists, a known kind
                 assert len(r.values) == 2 and r.values[1] in SPEC_KINDS, r
                 assert any(f[:3] == (r.module, r.device, r.values[0]) for f in functions), r

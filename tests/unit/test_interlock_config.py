@@ -150,3 +150,67 @@ interlocks:
     err = capsys.readouterr().err
     assert f"{path}:{N + 4}: interlocks[0].refuse: ble:chian.vel: no device chian in ble" in err
     assert "Traceback" not in err
+
+
+def test_a_rule_may_not_be_named_none() -> None:
+    errs = errors_of("""\
+interlocks:
+  - {name: none, when: "ble:load.kg > 30", refuse: ["ble:chain.vel"]}
+  - {name: NONE, when: "ble:load.kg > 30", refuse: ["ble:chain.vel"]}
+""")
+    assert errs[0].startswith(f"ramp.yaml:{N + 2}: interlocks[0].name: none is reserved")
+    assert errs[1].startswith(f"ramp.yaml:{N + 3}: interlocks[1].name: NONE is reserved")
+
+
+def test_severity_message_and_directions_load_as_data() -> None:
+    cfg, errors = parse_config(WIRING + """\
+interlocks:
+  - name: creep
+    when: "ble:chain.vel != 0"
+    limit: {"base:base.drive": 10}
+    severity: info
+    message: "Digging: the base creeps"
+  - name: bump
+    when: "base:l_button.press == 1"
+    stop: [{"base:*": forward}, "ble:chain.vel"]
+    severity: error
+  - {name: back, when: "base:r_button.press == 1", refuse: {"base:base.drive": reverse}}
+""", "ramp.yaml")
+    assert errors == [] and cfg is not None
+    creep, bump, back = cfg.interlocks
+    assert (creep.severity, creep.message, creep.directions) == (
+        "info", "Digging: the base creeps", ())
+    assert (bump.severity, bump.message) == ("error", "")
+    assert bump.patterns == (("base:*", None), ("ble:chain.vel", None))
+    assert bump.directions == (1, 0)
+    assert back.severity == "warning" and back.directions == (-1,)
+
+
+def test_bad_severity_message_or_direction_is_named_by_line_and_key() -> None:
+    errs = "\n".join(errors_of("""\
+interlocks:
+  - {name: a, when: "ble:load.kg > 30", refuse: ["ble:chain.vel"], severity: fatal}
+  - {name: b, when: "ble:load.kg > 30", refuse: ["ble:chain.vel"], message: "a, b"}
+  - {name: c, when: "ble:load.kg > 30", refuse: ["ble:chain.vel"], message: "x)"}
+  - {name: d, when: "ble:load.kg > 30", refuse: [{"base:*": backwards}]}
+  - {name: e, when: "ble:load.kg > 30", limit: {"base:*": forward}}
+  - {name: f, when: "ble:load.kg > 30", refuse: ["ble:chain.vel"], message: 3}
+"""))
+    assert f"ramp.yaml:{N + 2}: interlocks[0].severity: 'fatal' is not a severity" in errs
+    assert f"ramp.yaml:{N + 3}: interlocks[1].message: 'a, b': a message is one line" in errs
+    assert f"ramp.yaml:{N + 4}: interlocks[2].message: 'x)'" in errs
+    assert f"ramp.yaml:{N + 5}: interlocks[3].refuse: {{'base:*': 'backwards'}}: a " \
+           "one-direction entry is {PATTERN: forward} or {PATTERN: reverse}" in errs
+    assert "interlocks[4].limit: 'forward' is not a speed limit" in errs
+    assert f"ramp.yaml:{N + 7}: interlocks[5].message: expected the operator's advice" in errs
+
+
+def test_more_rules_than_the_cap_is_one_clear_error() -> None:
+    from ramp.layers.robot_distribution.interlocks import MAX_RULES
+
+    rules = "".join(f"  - {{name: r{i}, when: \"ble:load.kg > {i}\", refuse: [ble:chain.vel]}}\n"
+                    for i in range(MAX_RULES + 1))
+    errs = errors_of("interlocks:\n" + rules)
+    assert errs == [f"ramp.yaml:{N + 1}: interlocks: {MAX_RULES + 1} rules; at most "
+                    f"{MAX_RULES} (every request and tick may evaluate them: merge rules that "
+                    "share a condition)"]

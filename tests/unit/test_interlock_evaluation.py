@@ -1,0 +1,144 @@
+"""When interlock rules are evaluated (SPEC 11, issue 35 item 6): a tick evaluates only the
+rules that are active or read a property whose value changed, so 480 rules over readings
+that do not move cost the reads alone; and what a rule's entries cover and forbid."""
+
+from __future__ import annotations
+
+import time
+from types import SimpleNamespace
+from typing import Any
+
+from ramp.layers.module_distribution import Function, Module, Property
+from ramp.layers.robot_distribution.condition import parse_condition
+from ramp.layers.robot_distribution.interlocks import Interlocks, RuleSpec, covered
+from ramp.mcp.params import IntParam
+
+
+class Rig(Module):
+    """A module of one motor and 480 sensors, read from plain attributes."""
+
+    def __init__(self, sensors: int = 480) -> None:
+        super().__init__("m")
+        self.readings = [0.0] * sensors
+        self.v = 0
+        self.add(Function("motor", "vel", (IntParam(-100, 100),), self._vel))
+        self.add(Function("m", "go", (IntParam(-100, 100),), self._vel, moves=("motor",)))
+        self.prop(Property("motor", "vel", "int", lambda: self.v))
+        for i in range(sensors):
+            self.prop(Property(f"s{i}", "x", "float", self._reader(i)))
+
+    def _reader(self, i: int) -> Any:
+        return lambda: self.readings[i]
+
+    def _vel(self, v: int) -> None:
+        self.v = v
+
+    def stop(self) -> None:
+        self.v = 0
+
+    def is_moving(self) -> bool:
+        return self.v != 0
+
+
+def rig(n_rules: int = 480, sensors: int = 480) -> tuple[Rig, Interlocks]:
+    module = Rig(sensors)
+    slot = SimpleNamespace(name="m", state="ok", module=module)
+    specs = [RuleSpec(f"r{i}", parse_condition(f"m:s{i % sensors}.x > 10"), "refuse",
+                      (("m:motor.vel", None),)) for i in range(n_rules)]
+    return module, Interlocks(specs, {"m": slot})
+
+
+def evaluations(ilk: Interlocks) -> int:
+    return sum(r.evaluations for r in ilk.rules)
+
+
+def test_rules_are_not_re_evaluated_when_nothing_they_read_changed() -> None:
+    module, ilk = rig()
+    ilk.tick(0.0, 0.01)
+    assert evaluations(ilk) == 480  # the first tick sees every reading for the first time
+    for k in range(1, 50):
+        ilk.tick(k * 0.01, 0.01)
+    assert evaluations(ilk) == 480  # nothing moved: nothing evaluated
+    module.readings[7] = 3.0  # one reading moves, and stays clear
+    ilk.tick(0.5, 0.01)
+    assert evaluations(ilk) == 481  # only the rule that reads it
+    module.readings[7] = 20.0
+    ilk.tick(0.51, 0.01)
+    assert ilk.active_names() == ("r7",)
+    # An active rule is evaluated every tick (its release needs the time it has been clear).
+    before = evaluations(ilk)
+    ilk.tick(0.52, 0.01)
+    ilk.tick(0.53, 0.01)
+    assert evaluations(ilk) == before + 2
+    module.readings[7] = 0.0
+    for k in range(20):
+        ilk.tick(0.54 + k * 0.01, 0.01)
+    assert ilk.active_names() == ()
+
+
+def test_a_rule_engages_on_the_first_tick_its_reading_changes() -> None:
+    module, ilk = rig(n_rules=3, sensors=3)
+    ilk.tick(0.0, 0.01)
+    module.v = 50
+    module.readings[2] = 11.0
+    ilk.tick(0.01, 0.01)
+    assert ilk.active_names() == ("r2",)
+    assert module.v == 0  # a refuse stops what it covers as it engages
+
+
+def test_an_idle_tick_with_480_rules_costs_the_reads_alone() -> None:
+    """Not a benchmark (two shared cores): an order of magnitude, printed, with a bound far
+    above what the reads cost so the test cannot flake."""
+    _, ilk = rig()
+    ilk.tick(0.0, 0.01)
+    t0 = time.perf_counter()
+    for k in range(1, 101):
+        ilk.tick(k * 0.01, 0.01)
+    per_tick = (time.perf_counter() - t0) / 100
+    print(f"idle tick with 480 rules over 480 readings: {per_tick * 1e6:.0f} us")
+    assert per_tick < 0.005
+
+
+def test_a_module_level_function_is_covered_through_the_devices_it_moves() -> None:
+    module, _ = rig(1, 1)
+    functions, devices = covered("m:motor.vel", {"m": module})
+    assert sorted(f.name for _, f in functions) == ["go", "vel"]
+    assert devices == {"m": ("motor",)}
+    functions, _ = covered("m:m.go", {"m": module})
+    assert sorted(f.name for _, f in functions) == ["go", "vel"]
+
+
+def test_one_direction_refuses_that_way_and_lets_the_other_run() -> None:
+    module = Rig(1)
+    slot = SimpleNamespace(name="m", state="ok", module=module)
+    spec = RuleSpec("fwd", parse_condition("m:s0.x > 10"), "stop", (("m:m.go", None),),
+                    directions=(1,))
+    ilk = Interlocks([spec], {"m": slot})
+    module.v = -30  # reversing when the rule engages: left running
+    module.readings[0] = 20.0
+    ilk.tick(0.0, 0.01)
+    assert ilk.active_names() == ("fwd",) and module.v == -30
+    vel = module.functions[("motor", "vel")]
+    go = module.functions[("m", "go")]
+    assert ilk.permit("m", vel, [20], 0.01) is not None
+    assert ilk.permit("m", vel, [-20], 0.01) is None
+    assert ilk.permit("m", vel, [0], 0.01) is None
+    # `go` declares no senses and moves one device with a speed: the sign of its speed.
+    assert ilk.permit("m", go, [5], 0.01) is not None
+    assert ilk.permit("m", go, [-5], 0.01) is None
+
+
+def test_a_limit_never_re_runs_a_stopped_module_level_request() -> None:
+    module = Rig(1)
+    slot = SimpleNamespace(name="m", state="ok", module=module)
+    spec = RuleSpec("slow", parse_condition("m:s0.x > 10"), "limit", (("m:m.go", 10),))
+    ilk = Interlocks([spec], {"m": slot})
+    go = module.functions[("m", "go")]
+    assert ilk.permit("m", go, [60], 0.0) is None
+    go.run(60)
+    ilk.ran("m", go, [60])
+    module.stop()  # stopped by a path that did not tell the interlocks
+    module.readings[0] = 20.0
+    ilk.tick(0.01, 0.01)
+    assert ilk.active_names() == ("slow",)
+    assert module.v == 0
