@@ -13,6 +13,10 @@ with 20, run alternately `rt_trials` times, the median trial kept:
 The rules read six different get properties of both modules with one to four comparisons
 each, and none of them holds (a rule that holds refuses or clamps, which costs no more), so
 the requests run and the comparison is like for like.
+
+- **many rules** (`many_rules`): one trial with 480 such rules, its idle `interlocks` task
+  and a guarded request. A tick evaluates only rules whose readings changed, so the idle task
+  costs the reads of the six properties; a request still evaluates every rule guarding it.
 """
 
 from __future__ import annotations
@@ -40,6 +44,9 @@ from bench.common import (
 from bench.tick import tick_cost
 
 RULES = 20
+#: Issue 35.6's case: this many rules made the interlocks task cost 10 ms a tick, when every
+#: rule was evaluated every tick; one trial of it beside the others, its idle tick reported.
+MANY_RULES = 480
 REQUEST = b"base:lf_wheel.vel=(5)\n"
 STOP = b"base:base.stop=()\n"
 
@@ -124,6 +131,9 @@ def run(settings: Settings, workdir: Path) -> dict[str, Any]:
                      f"{settings.tick_duration_s:g} s, {settings.rt_requests} requests")
             trials[name].append(one_trial(name, config, workdir, settings, cpu))
     none, some = median_of(trials["none"]), median_of(trials["rules"])
+    progress(f"interlocks: {MANY_RULES} rules, one trial")
+    many = one_trial("many", config_with(workdir, "interlocks-many", MANY_RULES), workdir,
+                     settings, cpu)
 
     def diff(key: str) -> float | None:
         a, b = some.get(key), none.get(key)
@@ -143,5 +153,10 @@ def run(settings: Settings, workdir: Path) -> dict[str, Any]:
         "request_rtt_added_p50_us": diff("rtt_p50_us"),
         "request_rtt_mean_us": compare(some["rtt_mean_us"], none["rtt_mean_us"]),
         "request_rtt_added_mean_us": diff("rtt_mean_us"),
+        "many_rules": {"rules": MANY_RULES,
+                       "interlocks_task_us": {"mean": many["interlocks_task_mean_us"],
+                                              "max": many["interlocks_task_max_us"]},
+                       "tick_cost_us": many["tick_cost_us"],
+                       "request_rtt_p50_us": many["rtt_p50_us"]},
         "runs": trials,
     }

@@ -1,6 +1,7 @@
 """When interlock rules are evaluated (SPEC 11, issue 35 item 6): a tick evaluates only the
-rules that are active or read a property whose value changed, so 480 rules over readings
-that do not move cost the reads alone; and what a rule's entries cover and forbid."""
+rules that are active or have a comparison a changed reading may flip, so 480 rules over
+readings that do not cross a threshold cost the reads alone; and what a rule's entries cover
+and forbid."""
 
 from __future__ import annotations
 
@@ -59,9 +60,13 @@ def test_rules_are_not_re_evaluated_when_nothing_they_read_changed() -> None:
     for k in range(1, 50):
         ilk.tick(k * 0.01, 0.01)
     assert evaluations(ilk) == 480  # nothing moved: nothing evaluated
-    module.readings[7] = 3.0  # one reading moves, and stays clear
+    for k in range(10):  # readings wander (noise) without crossing a threshold
+        module.readings[k] = 3.0 + k / 10
+        ilk.tick(0.4 + k * 0.01, 0.01)
+    assert evaluations(ilk) == 480  # no comparison could have changed
+    module.readings[7] = 10.0  # on the threshold: `> 10` may flip, so it is asked
     ilk.tick(0.5, 0.01)
-    assert evaluations(ilk) == 481  # only the rule that reads it
+    assert evaluations(ilk) == 481 and ilk.active_names() == ()
     module.readings[7] = 20.0
     ilk.tick(0.51, 0.01)
     assert ilk.active_names() == ("r7",)
@@ -74,6 +79,40 @@ def test_rules_are_not_re_evaluated_when_nothing_they_read_changed() -> None:
     for k in range(20):
         ilk.tick(0.54 + k * 0.01, 0.01)
     assert ilk.active_names() == ()
+
+
+def test_equality_and_unreadable_readings_are_never_skipped() -> None:
+    module = Rig(2)
+    slot = SimpleNamespace(name="m", state="ok", module=module)
+    specs = [RuleSpec("eq", parse_condition("m:s0.x == 1"), "refuse", (("m:motor.vel", None),)),
+             RuleSpec("ne", parse_condition("not m:s1.x != 0"), "refuse",
+                      (("m:motor.vel", None),))]
+    ilk = Interlocks(specs, {"m": slot})
+    ilk.tick(0.0, 0.01)
+    assert ilk.active_names() == ("ne",)  # s1 reads 0
+    module.readings[0], module.readings[1] = 1.0, 0.5
+    ilk.tick(0.01, 0.01)
+    assert "eq" in ilk.active_names()
+    for k in range(20):
+        ilk.tick(0.02 + k * 0.01, 0.01)
+    assert ilk.active_names() == ("eq",)
+    slot.state = "fault"  # unreadable: fail closed, both
+    ilk.tick(0.3, 0.01)
+    assert ilk.active_names() == ("eq", "ne")
+
+
+def test_a_rule_released_by_a_request_is_seen_again_by_the_next_tick() -> None:
+    module, ilk = rig(n_rules=1, sensors=1)
+    module.readings[0] = 20.0
+    ilk.tick(0.0, 0.01)
+    assert ilk.active_names() == ("r0",)
+    module.readings[0] = 0.0
+    vel = module.functions[("motor", "vel")]
+    assert ilk.permit("m", vel, [5], 0.05) is not None  # clear, not yet for 0.1 s
+    assert ilk.permit("m", vel, [5], 0.2) is None  # released by the request
+    module.readings[0] = 20.0  # back to what the last tick saw: it holds again
+    ilk.tick(0.21, 0.01)
+    assert ilk.active_names() == ("r0",)
 
 
 def test_a_rule_engages_on_the_first_tick_its_reading_changes() -> None:
@@ -142,3 +181,17 @@ def test_a_limit_never_re_runs_a_stopped_module_level_request() -> None:
     ilk.tick(0.01, 0.01)
     assert ilk.active_names() == ("slow",)
     assert module.v == 0
+
+
+def test_a_request_evaluates_only_rules_a_changed_reading_may_flip() -> None:
+    module, ilk = rig()
+    ilk.tick(0.0, 0.01)
+    vel = module.functions[("motor", "vel")]
+    before = evaluations(ilk)
+    for k in range(20):
+        assert ilk.permit("m", vel, [5], 0.001 * k) is None
+    assert evaluations(ilk) == before  # 480 guards, nothing changed: none evaluated
+    module.readings[3] = 11.0  # between two ticks: the request still sees it
+    assert ilk.permit("m", vel, [5], 0.03) is not None
+    assert evaluations(ilk) == before + 1
+    assert ilk.active_names() == ("r3",)

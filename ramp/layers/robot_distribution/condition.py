@@ -136,6 +136,22 @@ def properties(node: Node) -> list[str]:
     return out
 
 
+def comparisons(node: Node) -> list[Compare]:
+    """Every comparison of a condition, in the order they appear: a condition's value can
+    change only when one of these does (what lets the interlocks skip a rule)."""
+    out: list[Compare] = []
+    stack: list[Node] = [node]
+    while stack:
+        n = stack.pop()
+        if isinstance(n, Compare):
+            out.append(n)
+        elif isinstance(n, Not):
+            stack.append(n.arg)
+        else:
+            stack.extend(reversed(n.args))
+    return out
+
+
 # -- parsing ---------------------------------------------------------------------------------
 
 @dataclass(frozen=True)

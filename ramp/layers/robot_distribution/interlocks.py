@@ -31,11 +31,14 @@ running, so Scout can back away from a pressed bumper.
 
 **When rules are evaluated.** Every tick, after the buses sampled their inputs and before any
 module's own work (`tick`), and again for the rules guarding a motion request as it arrives
-(`permit`), since a request earlier in the same message may have changed a reading. A tick
+(`permit`), since a request earlier in the same message may have changed a reading (a
+request skips the same rules a tick would, against the readings the last tick saw). A tick
 reads each property the rules use once (however many rules read it) and evaluates only the
-rules that are active or read a property whose value changed since the tick before: a rule
-that did not hold on the same values cannot hold now. Its cost is the reads, and the rules
-touched by a change; 480 rules over readings that do not move cost the reads alone. The
+rules that are active, or released since the last tick, or have a comparison that the
+change of a reading since the last tick may flip (a threshold between the old and the new
+value): a rule that did not hold cannot hold while none of its comparisons changed. Its
+cost is the reads and the rules a change touches; 480 rules over readings that wander
+about without crossing a threshold (a noisy battery voltage) cost the reads alone. The
 reads are the modules' own get properties (`Property.read`), the values a get answer is
 formatted from, never a formatted answer.
 
@@ -67,6 +70,7 @@ and neither is a speed function asked for 0 (`ble:chain.vel=(0)`), which is one.
 
 from __future__ import annotations
 
+import bisect
 import fnmatch
 import logging
 import math
@@ -76,7 +80,12 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from ramp.layers.module_distribution import Function, Module, Property
-from ramp.layers.robot_distribution.condition import Node, compile_condition, properties
+from ramp.layers.robot_distribution.condition import (
+    Node,
+    comparisons,
+    compile_condition,
+    properties,
+)
 from ramp.mcp.params import FlagParam, FloatParam, IntParam, Param
 
 log = logging.getLogger("ramp.interlock")
@@ -322,6 +331,13 @@ class Interlocks:
         #: reading it: a tick evaluates only what a change touches.
         self._ticked: list[Any] = []
         self._readers: list[list[Rule]] = []
+        #: Per property: its rules' thresholds, sorted, with the rules comparing against
+        #: each, and the `==`/`!=` ones by value: a change of reading touches only the rules
+        #: whose comparisons it can flip (`_crossed`).
+        self._thresholds: list[tuple[list[float], list[list[Rule]], dict[float, list[Rule]]]]
+        self._thresholds = []
+        #: Rules released outside a tick (by a request or a reset): evaluated at the next.
+        self._recheck: dict[int, Rule] = {}
         self._prop_index: dict[str, int] = {}
         #: Per guarded function: the properties its rules read.
         self._guard_props: dict[tuple[str, str, str], tuple[int, ...]] = {}
@@ -348,9 +364,19 @@ class Interlocks:
         self._all = tuple(range(len(self.props)))
         self._ticked = [_UNSEEN] * len(self.props)
         self._readers = [[] for _ in self.props]
+        ordered: list[dict[float, list[Rule]]] = [{} for _ in self.props]
+        equal: list[dict[float, list[Rule]]] = [{} for _ in self.props]
         for rule in self.rules:
             for i in set(rule.index):
                 self._readers[i].append(rule)
+            for cmp in comparisons(rule.spec.when):
+                by = equal if cmp.op in ("==", "!=") else ordered
+                group = by[self._prop_index[cmp.prop]].setdefault(cmp.value, [])
+                if rule not in group:
+                    group.append(rule)
+        for i in range(len(self.props)):
+            keys = sorted(ordered[i])
+            self._thresholds.append((keys, [ordered[i][k] for k in keys], equal[i]))
         self._remembering = [(name, slot) for name, slot in slots.items()
                              if name in self._last_args]
 
@@ -436,12 +462,16 @@ class Interlocks:
                     and not (slot.state == "ok" and slot.module.is_moving()):
                 self._last_args[name] = None
         self.read(self._all)
-        values, ticked, readers = self.values, self._ticked, self._readers
+        values, ticked = self.values, self._ticked
         todo = dict(self._active)
+        if self._recheck:
+            todo.update(self._recheck)
+            self._recheck.clear()
         for i, v in enumerate(values):
-            if v != ticked[i]:
+            old = ticked[i]
+            if v != old:
                 ticked[i] = v
-                for rule in readers[i]:
+                for rule in self._crossed(i, old, v):
                     todo[rule.order] = rule
         changed = False
         for order in sorted(todo) if len(todo) > 1 else todo:
@@ -454,6 +484,22 @@ class Interlocks:
                 changed |= self._bring_down(rule)
         if changed and self.on_motion_changed is not None:
             self.on_motion_changed(now)
+
+    def _crossed(self, i: int, old: Any, new: Any) -> list[Rule]:
+        """The rules with a comparison of property `i` that a change from `old` to `new` may
+        flip: a threshold between the two (both ends included), or an `==`/`!=` value equal
+        to either. Every rule reading it when either is not a number (unread, unseen)."""
+        if old is None or new is None or old is _UNSEEN:
+            return self._readers[i]
+        keys, groups, equal = self._thresholds[i]
+        lo, hi = (old, new) if old < new else (new, old)
+        out: list[Rule] = []
+        for k in range(bisect.bisect_left(keys, lo), bisect.bisect_right(keys, hi)):
+            out.extend(groups[k])
+        if equal:
+            out.extend(equal.get(old, ()))
+            out.extend(equal.get(new, ()))
+        return out
 
     def read(self, indices: Sequence[int]) -> None:
         """Read the properties at `indices` now: None for one that cannot be read (its
@@ -506,6 +552,7 @@ class Interlocks:
         info = rule.spec.severity == "info"
         if not active:
             del self._active[rule.order]
+            self._recheck[rule.order] = rule  # the next tick sees it on its own readings
             rule.why = ""
             rule.seen_true = False
             log.log(logging.DEBUG if info else logging.INFO, "interlock %s released",
@@ -629,14 +676,27 @@ class Interlocks:
         guards = self.guards.get(key)
         if guards is None:
             return None
-        self.read(self._guard_props[key])
-        readings = self.values
+        props = self._guard_props[key]
+        self.read(props)
+        readings, ticked = self.values, self._ticked
+        # An inactive rule the last tick left so, none of whose comparisons the readings
+        # since can have flipped, still does not hold: only the others are evaluated.
+        touched: set[int] | None = None
+        for i in props:
+            if readings[i] != ticked[i]:
+                if touched is None:
+                    touched = set(self._recheck)
+                touched.update(r.order for r in self._crossed(i, ticked[i], readings[i]))
+        if touched is None and self._recheck:
+            touched = set(self._recheck)
         refusal = None
         stopped = False
         senses: Sequence[int] | None = None
         told = False  # `senses` worked out (once per request, when a guard needs it)
         for g in guards:
             rule = g.rule
+            if not rule.active and (touched is None or rule.order not in touched):
+                continue
             verdict = rule.evaluate(readings)
             if verdict != CLEAR or rule.active:
                 stopped |= self.apply(rule, verdict, now)
