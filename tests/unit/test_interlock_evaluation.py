@@ -5,9 +5,12 @@ and forbid."""
 
 from __future__ import annotations
 
+import logging
 import time
 from types import SimpleNamespace
 from typing import Any
+
+import pytest
 
 from ramp.layers.module_distribution import Function, Module, Property
 from ramp.layers.robot_distribution.condition import parse_condition
@@ -195,3 +198,22 @@ def test_a_request_evaluates_only_rules_a_changed_reading_may_flip() -> None:
     assert ilk.permit("m", vel, [5], 0.03) is not None
     assert evaluations(ilk) == before + 1
     assert ilk.active_names() == ("r3",)
+
+
+def test_an_info_rule_logs_at_debug_and_a_warning_rule_at_warning(
+        caplog: pytest.LogCaptureFixture) -> None:
+    module = Rig(2)
+    slot = SimpleNamespace(name="m", state="ok", module=module)
+    specs = [RuleSpec("shaping", parse_condition("m:s0.x > 10"), "stop",
+                      (("m:motor.vel", None),), severity="info"),
+             RuleSpec("alarm", parse_condition("m:s1.x > 10"), "stop",
+                      (("m:motor.vel", None),))]
+    ilk = Interlocks(specs, {"m": slot})
+    ilk.tick(0.0, 0.01)
+    module.readings[0] = module.readings[1] = 20.0
+    with caplog.at_level(logging.DEBUG, logger="ramp.interlock"):
+        ilk.tick(0.01, 0.01)
+    levels = {r.getMessage().split()[1]: r.levelno for r in caplog.records
+              if r.getMessage().startswith("interlock ")}
+    assert levels == {"shaping": logging.DEBUG, "alarm": logging.WARNING}
+    assert [r.activations for r in ilk.rules] == [1, 1]
