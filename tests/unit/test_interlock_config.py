@@ -214,3 +214,17 @@ def test_more_rules_than_the_cap_is_one_clear_error() -> None:
     assert errs == [f"ramp.yaml:{N + 1}: interlocks: {MAX_RULES + 1} rules; at most "
                     f"{MAX_RULES} (every request and tick may evaluate them: merge rules that "
                     "share a condition)"]
+
+
+def test_ramp_check_explain_lists_what_each_rule_covers(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    from tests.harness import REPO
+
+    assert main(["check", "--explain", str(REPO / "examples/robots/scout.yaml")]) == 0
+    out = capsys.readouterr().out
+    assert "bumper (error, latched): stop while base:bumper_left.press == 1 or " \
+           "base:bumper_right.press == 1" in out
+    assert "  base:* (forward only) covers base:base.drive, base:left_wheel.vel, " \
+           "base:right_wheel.vel" in out
+    assert "  base:base.drive to 30 % covers base:base.drive, base:left_wheel.vel, " \
+           "base:right_wheel.vel" in out
