@@ -217,3 +217,15 @@ def test_an_info_rule_logs_at_debug_and_a_warning_rule_at_warning(
               if r.getMessage().startswith("interlock ")}
     assert levels == {"shaping": logging.DEBUG, "alarm": logging.WARNING}
     assert [r.activations for r in ilk.rules] == [1, 1]
+
+
+def test_which_way_a_drive_turns_each_wheel() -> None:
+    from ramp.modules import base, diff_base  # noqa: PLC0415
+
+    assert base.drive_senses(40, 0) == (1, 1, 1, 1)
+    assert base.drive_senses(40, 180) == base.drive_senses(-40, 0) == (-1, -1, -1, -1)
+    assert base.drive_senses(40, 90) == (1, 1, -1, -1)  # a spin: one side each way
+    assert base.drive_senses(40, 45) == (1, 1, 0, 0)  # a pivot on the right side
+    assert base.drive_senses(30, 160) == (-1, -1, -1, -1)  # backing away, turning
+    assert base.drive_senses(0, 0) == (0, 0, 0, 0)
+    assert diff_base.drive_senses(30, 200) == (-1, -1)
