@@ -458,8 +458,7 @@ class Interlocks:
         """Scheduler task, before module work: the rules whose readings changed (and the
         active ones) evaluated, limits enforced."""
         for name, slot in self._remembering:  # before the rules: a limit reads it
-            if self._last_args[name] is not None \
-                    and not (slot.state == "ok" and slot.module.is_moving()):
+            if self._last_args[name] is not None and not _moving(slot):
                 self._last_args[name] = None
         self.read(self._all)
         values, ticked = self.values, self._ticked
@@ -645,11 +644,7 @@ class Interlocks:
                 args = list(remembered[1])
                 if lim.lo <= args[0] <= lim.hi:
                     continue
-                try:
-                    moving = slot.module.is_moving()
-                except Exception:
-                    moving = True  # re-running at the limit is slower than what was asked
-                if not moving:  # stopped by a path that did not tell us: nothing runs now
+                if not _moving(slot):  # stopped by a path that did not tell us: nothing runs
                     self._last_args[slot.name] = None
                     continue
                 args[0] = min(max(args[0], lim.lo), lim.hi)
@@ -772,6 +767,15 @@ class Interlocks:
 
     def active_names(self) -> tuple[str, ...]:
         return tuple(r.name for r in self.rules if r.active)
+
+
+def _moving(slot: Any) -> bool:
+    """The slot's module is attached and moving; a module whose `is_moving` raises (plugin
+    code) counts as still, so nothing it remembers is ever re-run."""
+    try:
+        return slot.state == "ok" and bool(slot.module.is_moving())
+    except Exception:
+        return False
 
 
 def _zero_of(module: Module, device: str) -> tuple[Function, tuple[Any, ...]] | None:
