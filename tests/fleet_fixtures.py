@@ -85,3 +85,34 @@ class Collector:
     def close(self) -> None:
         self.client.loop_stop()
         self.client.disconnect()
+
+
+def start_agent(config: str, backend: str, broker: str, serial: str, state_dir: str,
+                *extra: str) -> Any:
+    """`ramp-fleet-agent` as a process, once it printed its start line."""
+    import select
+    import subprocess
+    import sys
+
+    from tests.harness import REPO
+
+    log = open(f"{state_dir}/agent-{serial}.log", "a")  # noqa: SIM115 (the process's)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "ramp.fleet.cli", "--config", config, "--backend", backend,
+         "--broker", broker, "--serial", serial, "--state-dir", state_dir, *extra],
+        cwd=REPO, text=True, stdout=subprocess.PIPE, stderr=log)
+    log.close()
+    assert proc.stdout is not None
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline:
+        r, _, _ = select.select([proc.stdout], [], [], 0.5)
+        if r:
+            line = proc.stdout.readline()
+            if line.startswith("ramp-fleet-agent:"):
+                return proc
+            if not line and proc.poll() is not None:
+                break
+    proc.kill()
+    proc.communicate()
+    with open(f"{state_dir}/agent-{serial}.log") as f:
+        raise AssertionError("the agent did not start: " + f.read()[-3000:])

@@ -1,0 +1,1 @@
+"""Orders (placeholder until the autonomy's endpoint is in)."""
