@@ -17,7 +17,7 @@ import json
 import logging
 import math
 import time
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -51,6 +51,7 @@ class AutonomyPort(Protocol):
     """What the agent needs of the autonomy (`ramp.fleet.autonomy_link.AutonomyLink`)."""
 
     address: str
+    fault: str
 
     @property
     def connected(self) -> bool: ...
@@ -58,7 +59,8 @@ class AutonomyPort(Protocol):
     @property
     def status(self) -> dict[str, Any]: ...
 
-    def command(self, cmd: str, **args: Any) -> bool: ...
+    def command(self, cmd: str, on_reply: Callable[[dict[str, Any]], None] | None = None,
+                **args: Any) -> bool: ...
 
     def tick(self, now: float, dt: float) -> None: ...
 
@@ -81,7 +83,7 @@ class Agent:
     def __init__(self, link: FleetMcpLink, mqtt: Publisher, pause: PauseStore, *,
                  now: Callable[[], float], autonomy: AutonomyPort | None = None,
                  identity: Identity | None = None,
-                 inbox: Any = None) -> None:
+                 inbox: deque[tuple[str, bytes]] | None = None) -> None:
         self.link = link
         self.mqtt = mqtt
         self.headers = mqtt.headers
@@ -89,7 +91,8 @@ class Agent:
         self.now = now
         self.autonomy = autonomy
         self.identity = identity or Identity()
-        self.inbox = inbox if inbox is not None else getattr(mqtt, "inbox", [])
+        self.inbox: deque[tuple[str, bytes]] = inbox if inbox is not None \
+            else getattr(mqtt, "inbox", deque())
         self.model: RobotModel | None = None
         self.status: RobotStatus | None = None
         self._describing = False
@@ -172,6 +175,11 @@ class Agent:
 
         self._polling = self.link.send(msg, got)
 
+    def on_autonomy(self) -> None:
+        """The autonomy's endpoint (re)connected: a fleet pause holds there too."""
+        if self.pause.paused and self.autonomy is not None:
+            self.autonomy.command("pause", reason="paused by the fleet (stopPause)")
+
     # -- instant actions ----------------------------------------------------------------------
     def _set_action(self, action: v.Action, status: str, result: str = "") -> None:
         self.actions[action.action_id] = v.action_state(action.action_id, action.action_type,
@@ -213,7 +221,7 @@ class Agent:
         """Pause first (on disk), then stop every module at once, then pause the autonomy."""
         self.pause.set(True, f"stopPause {action.action_id}")
         if self.autonomy is not None:
-            self.autonomy.command("pause")
+            self.autonomy.command("pause", reason="paused by the fleet (stopPause)")
         if self.orders is not None:
             self.orders.on_pause()
         self._set_action(action, v.RUNNING, "stopping")
@@ -324,10 +332,6 @@ class Agent:
             f.operating_mode = mapping.operating_mode(status.owner, running)
             f.information.append(v.info("controlOwner", f"control is held by {status.owner}",
                                         {"owner": status.owner}))
-            if status.owner not in ("none", mapping.AUTONOMY_OWNER) and \
-                    self.orders is not None and self.orders.active:
-                f.information.append(v.info("orderWaiting", "the order waits: an operator "
-                                            f"({status.owner}) holds control"))
         if self.pause.paused:
             f.information.append(v.info("fleetPause", "paused by the fleet (stopPause): the "
                                         "autonomy is paused and orders are refused until "

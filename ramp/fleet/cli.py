@@ -122,6 +122,7 @@ def run(cfg: fleetconf.FleetConfig, backend: tuple[str, int], *,
     if autonomy is not None:
         from ramp.fleet.orders import Orders
         agent.orders = Orders(agent, autonomy)
+        autonomy.on_connect = agent.on_autonomy
     agent.add_tasks(scheduler)
     stopping: list[str] = []
 
