@@ -52,12 +52,14 @@ def find_mosquitto() -> str | None:
 
 
 def mosquitto_conf(port: int, *, host: str = "127.0.0.1", tls: BrokerTls | None = None,
-                   log_file: Path | None = None) -> str:
+                   log_file: Path | None = None, run_as_me: bool = True) -> str:
     """The text of a mosquitto.conf with one listener: anonymous plain MQTT, or TLS that
-    requires a client certificate whose CN is the user name, checked against the ACL."""
+    requires a client certificate whose CN is the user name, checked against the ACL.
+    `run_as_me`: a broker we start as root stays root (it reads our private temp files);
+    a deployed config leaves that to Debian's service (the `mosquitto` user)."""
     lines = ["# Written by RAMP (ramp/fleet/broker.py).", "per_listener_settings false",
              "persistence false"]
-    if os.geteuid() == 0:
+    if run_as_me and os.geteuid() == 0:
         # Run as root, mosquitto drops to the `mosquitto` user, which cannot read our 0600
         # keys in a private directory; stay the user that started it.
         lines.append(f"user {getpass.getuser()}")
