@@ -10,8 +10,10 @@ import argparse
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-SubParsers = argparse._SubParsersAction[argparse.ArgumentParser]
+if TYPE_CHECKING:
+    SubParsers = argparse._SubParsersAction[argparse.ArgumentParser]
 
 
 def add_init(sub: SubParsers) -> None:
@@ -65,7 +67,7 @@ def cmd_init(args: argparse.Namespace) -> int:
     return 0
 
 
-FLEET_COMMANDS: dict[str, Callable[[SubParsers], None]] = {"init": add_init}
+FLEET_COMMANDS: dict[str, Callable[[SubParsers], None]] = {"init": add_init}  # noqa: F821
 
 
 def add_fleet_parser(sub: SubParsers) -> None:
