@@ -97,6 +97,8 @@ class Agent:
         self.status: RobotStatus | None = None
         self._describing = False
         self._polling = False
+        #: Counts poll answers: a decision on control waits for one sent after the question.
+        self.status_seq = 0
         self._poll_now = False
         self.actions: OrderedDict[str, dict[str, Any]] = OrderedDict()
         self._last_key = ""
@@ -169,6 +171,7 @@ class Agent:
             if error or self.model is not model:
                 return
             self.status = RobotStatus.read(rows, model.modules)
+            self.status_seq += 1
             if self._poll_now:
                 self._poll_now = False
                 self._state_due = True
@@ -218,13 +221,9 @@ class Agent:
                              + ", ".join(v.INSTANT_ACTIONS))
 
     def stop_pause(self, action: v.Action) -> None:
-        """Pause first (on disk), then stop every module at once, then pause the autonomy."""
-        self.pause.set(True, f"stopPause {action.action_id}")
-        if self.autonomy is not None:
-            self.autonomy.command("pause", reason="paused by the fleet (stopPause)")
-        if self.orders is not None:
-            self.orders.on_pause()
-        self._set_action(action, v.RUNNING, "stopping")
+        """Hold the autonomy (so it sends no new motion after the stop), stop every module
+        at once through MCP, then write the pause to disk (an fsync may take a while on an
+        SD card; the stop is already out)."""
 
         def stopped(rows: list[Response], error: str) -> None:
             errors = [r for r in rows if r.prop == "error"]
@@ -238,7 +237,14 @@ class Agent:
             self._polling = False  # a poll sent before the stop would show motion
             self.poll(self.now(), 0.0)
 
-        if not self.link.send("robot:robot.stop=()", stopped):
+        if self.autonomy is not None:
+            self.autonomy.command("pause", reason="paused by the fleet (stopPause)")
+        self._set_action(action, v.RUNNING, "stopping")
+        sent = self.link.send("robot:robot.stop=()", stopped)
+        self.pause.set(True, f"stopPause {action.action_id}")
+        if self.orders is not None:
+            self.orders.on_pause()
+        if not sent:
             self._set_action(action, v.FAILED, "paused, but the robot's backend is not "
                              f"reachable to stop it ({self.link.fault})")
 

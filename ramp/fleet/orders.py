@@ -36,6 +36,7 @@ class Orders:
         self.last_node_id = ""
         self.last_node_seq = 0
         self.waiting_reason = ""
+        self._seq_at_receive = 0
 
     # -- what the agent asks ------------------------------------------------------------------
     @property
@@ -81,6 +82,7 @@ class Orders:
                                       f"({self.autonomy.fault}); the order is refused", ref))
             return
         self.order = order
+        self._seq_at_receive = self.agent.status_seq
         node = order.nodes[0]
         self.action = node.actions[0]
         self.action_status, self.result = v.WAITING, "waiting for control to be free"
@@ -110,6 +112,8 @@ class Orders:
         if not self.dispatched:
             if self.agent.pause.paused:
                 return
+            if self.agent.status_seq < self._seq_at_receive + 2:
+                return  # who holds control is known only from a poll sent after the order
             if owner not in ("none", mapping.AUTONOMY_OWNER):
                 self.result = f"waiting: {owner} holds control (an order never takes it)"
                 return
@@ -120,6 +124,11 @@ class Orders:
             self.action_status, self.result = v.INITIALIZING, "starting the mission"
             self.autonomy.command(RMC, self._dispatched)
             return
+        if owner not in ("none", mapping.AUTONOMY_OWNER) and self.action_status == v.RUNNING:
+            self.result = f"paused: {owner} holds control; the mission resumes when control " \
+                          "is free"
+        elif self.result.startswith("paused: ") and owner in ("none", mapping.AUTONOMY_OWNER):
+            self.result = "the mission runs"
         if st.get("over"):
             self.action_status = v.FINISHED
             self.result = f"mission {st.get('outcome')}: {st.get('delivered_kg', 0)} kg " \
@@ -175,7 +184,7 @@ class Orders:
         f.last_node_id, f.last_node_sequence_id = self.last_node_id, self.last_node_seq
         if self.active:
             f.node_states = [v.node_state(n.raw) for n in self.order.nodes]
-            if self.result.startswith("waiting"):
+            if self.result.startswith(("waiting", "paused: ")):
                 f.information.append(v.info("orderWaiting", self.result))
         if self.action is not None:
             f.action_states = [*f.action_states, v.action_state(

@@ -108,9 +108,10 @@ def test_order_runs_the_mission_and_a_dead_agent_stops_it(
         h = v.Headers("RAMP", SERIAL)
         col.client.publish(v.topic("RAMP", SERIAL, "order"), json.dumps(v.order(
             h, "mission-1", [v.node("start", 0, actions=[v.action("rmcMission", "m1")])])))
-        waiting = col.wait_for("/state", lambda m: bool(info(m, "orderWaiting")))
+        waiting = col.wait_for("/state", lambda m: m["operatingMode"] == "MANUAL" and any(
+            "ana holds control" in i["infoDescription"] for i in info(m, "orderWaiting")))
         assert action(waiting, "m1")["actionStatus"] == "WAITING"
-        assert waiting["operatingMode"] == "MANUAL" and waiting["orderId"] == "mission-1"
+        assert waiting["orderId"] == "mission-1"
         validate("state", waiting)
         time.sleep(1.0)
         assert "ana" in ask_line(op, "robot:robot.get=()")

@@ -137,3 +137,32 @@ def test_last_will_and_broker_return(robot: tuple[str, int], mosquitto: LocalBro
 
 
 
+
+
+def test_scout_is_mapped_from_its_own_describe(mosquitto: LocalBroker, tmp_path: Path) -> None:
+    """Another robot, no fleet code for it: two wheels drive, the arm does not, the bumper's
+    interlock is an error in state."""
+    proc, host, port = start_ramp(["--sim", "--config", "examples/robots/scout.yaml",
+                                   "--host", "127.0.0.1", "--port", "0"],
+                                  stderr=subprocess.DEVNULL)
+    col = Collector(mosquitto.host, mosquitto.port, ["uagv/v2/RAMP/scout-1/#"])
+    agent = start_agent("examples/robots/scout.yaml", f"{host}:{port}", mosquitto.address,
+                        "scout-1", str(tmp_path))
+    op = socket.create_connection((host, port))
+    try:
+        sheet = col.wait_for("/factsheet", lambda m: True)
+        versions = {e["key"]: e["value"] for e in sheet["vehicleConfig"]["versions"]}
+        assert "left_wheel" in versions["module.base"] and "module.arm" in versions
+        validate("factsheet", sheet)
+        assert ask_line(op, "base:base.drive=(30,0)") == ""
+        col.wait_for("/state", lambda m: m["driving"] and m["operatingMode"] == "SERVICE")
+        ask_line(op, "base:base.stop=()sim:input.set=(base,bumper_left,1)")
+        bumped = col.wait_for("/state", lambda m: any(
+            e["errorType"] == "interlockActive" for e in m["errors"]))
+        assert not bumped["driving"]
+        validate("state", bumped)
+    finally:
+        op.close()
+        stop_process(agent)
+        col.close()
+        stop_process(proc)
