@@ -112,14 +112,18 @@ def test_last_will_and_broker_return(robot: tuple[str, int], mosquitto: LocalBro
     agent = run_agent(robot, mosquitto, tmp_path)
     try:
         master.wait_for("/state", lambda m: True)
-        # The broker goes away and comes back: the agent reconnects and says ONLINE again.
+        send(master, "instantActions", v.instant_actions(v.Headers("RAMP", SERIAL), [
+            v.action("stopPause", "b1")]))
+        master.wait_for("/state", lambda m: m["paused"])
+        # The broker goes away and comes back: the agent reconnects and says ONLINE again,
+        # and the robot is still paused.
         mosquitto.stop()
         time.sleep(0.5)
         master.close()
         mosquitto.start()
         col = Collector(mosquitto.host, mosquitto.port, [f"uagv/v2/RAMP/{SERIAL}/#"])
         col.wait_for("/connection", lambda m: m["connectionState"] == "ONLINE", timeout=15)
-        col.wait_for("/state", lambda m: not m["driving"], timeout=15)
+        col.wait_for("/state", lambda m: not m["driving"] and m["paused"], timeout=15)
         # The agent is killed: the broker publishes its will, retained.
         agent.send_signal(signal.SIGKILL)
         agent.wait(5)
