@@ -36,6 +36,7 @@ VISUALIZATION_HZ = 2.0
 POLL_HZ = 20.0
 MAX_ACTION_STATES = 32
 ERROR_KEEP_S = 60.0  # how long an orderError stays in state
+REDESCRIBE_S = 2.0  # at most this often: describe again when a module comes back
 
 
 class Publisher(Protocol):
@@ -100,6 +101,7 @@ class Agent:
         #: Counts poll answers: a decision on control waits for one sent after the question.
         self.status_seq = 0
         self._poll_now = False
+        self._described_at = -math.inf
         self.actions: OrderedDict[str, dict[str, Any]] = OrderedDict()
         self._last_key = ""
         self._last_state_at = -math.inf
@@ -127,9 +129,14 @@ class Agent:
 
     # -- the backend --------------------------------------------------------------------------
     def _on_backend(self) -> None:
+        """A new connection: nothing known of the robot until it describes itself."""
         self.model = None
-        self._describing = True
         self._polling = False
+        self._describe()
+
+    def _describe(self) -> None:
+        self._described_at = self.now()
+        self._describing = True
         self.link.send("robot:robot.describe=()", self._on_robot_describe)
 
     def _on_backend_lost(self, reason: str) -> None:
@@ -172,6 +179,13 @@ class Agent:
                 return
             self.status = RobotStatus.read(rows, model.modules)
             self.status_seq += 1
+            missing = [m for m, st in self.status.module_states.items()
+                       if st == "ok" and not model.functions.get(m)]
+            if missing and now - self._described_at >= REDESCRIBE_S:
+                # A module in fault or detached at describe time answered no rows; it is
+                # back: learn its devices (its drive motors, battery, latches) now.
+                log.info("module %s is back: describing the robot again", ", ".join(missing))
+                self._describe()
             if self._poll_now:
                 self._poll_now = False
                 self._state_due = True

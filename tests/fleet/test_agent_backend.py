@@ -170,3 +170,28 @@ def test_scout_is_mapped_from_its_own_describe(mosquitto: LocalBroker, tmp_path:
         stop_process(agent)
         col.close()
         stop_process(proc)
+
+
+def test_a_module_in_fault_at_start_is_learnt_when_it_comes_back(
+        robot: tuple[str, int], mosquitto: LocalBroker, tmp_path: Path) -> None:
+    col = Collector(mosquitto.host, mosquitto.port, [f"uagv/v2/RAMP/{SERIAL}/#"])
+    op = socket.create_connection(robot)
+    ask_line(op, "sim:bus.unplug=(ble_motors)")
+    agent = run_agent(robot, mosquitto, tmp_path)
+    try:
+        faulted = col.wait_for("/state", lambda m: any(
+            e["errorType"] in ("moduleFault", "moduleDetached") for e in m["errors"]))
+        validate("state", faulted)
+
+        def ble_devices(m: dict[str, Any]) -> str:
+            return next((e["value"] for e in m["vehicleConfig"]["versions"]
+                         if e["key"] == "module.ble"), "")
+
+        assert "lift" not in ble_devices(col.wait_for("/factsheet", lambda m: True))
+        ask_line(op, "sim:bus.plug=(ble_motors)")
+        col.wait_for("/factsheet", lambda m: "lift" in ble_devices(m), timeout=15)
+        col.wait_for("/state", lambda m: not m["errors"], timeout=15)
+    finally:
+        op.close()
+        stop_process(agent)
+        col.close()
