@@ -225,6 +225,15 @@ class Agent:
             else:
                 ok, why = self.orders.cancel()
                 self._set_action(action, v.FINISHED if ok else v.FAILED, why)
+        elif kind == "rmcMission":
+            if self.orders is None:
+                self._set_action(action, v.FAILED, "this robot has no autonomy: it cannot run "
+                                 "a mission")
+            elif self.pause.paused:
+                self._set_action(action, v.FAILED, "the robot is paused by the fleet "
+                                 "(stopPause): send startPause first")
+            else:
+                self.orders.instant(action)
         elif kind == "stateRequest":
             self._set_action(action, v.FINISHED, "state sent")
         elif kind == "factsheetRequest":

@@ -55,7 +55,7 @@ class Orders:
     def factsheet_actions(self) -> list[dict[str, Any]]:
         return [v.agv_action(RMC, "the whole RMC mission (dig, return, deposit, until the "
                              "run's time is nearly out), by the autonomy's own planner and "
-                             "localizer, from where the robot stands", ["NODE"],
+                             "localizer, from where the robot stands", ["INSTANT", "NODE"],
                              result="delivered kg")]
 
     # -- orders -------------------------------------------------------------------------------
@@ -133,20 +133,40 @@ class Orders:
             self.action_status = v.FINISHED
             self.result = f"mission {st.get('outcome')}: {st.get('delivered_kg', 0)} kg " \
                           "delivered"
-            self.last_node_id = self.order.nodes[0].node_id
-            self.last_node_seq = self.order.nodes[0].sequence_id
+            self._reached_first_node()
 
     def _dispatched(self, reply: dict[str, Any]) -> None:
         if self.order is None:
             return
         if reply.get("ok"):
             self.action_status, self.result = v.RUNNING, "the mission runs"
-            self.last_node_id = self.order.nodes[0].node_id
-            self.last_node_seq = self.order.nodes[0].sequence_id
+            self._reached_first_node()
         else:
             self.action_status = v.FAILED
             self.result = f"the autonomy refused: {reply.get('error', 'no reason')}"
         self.agent._state_due = True
+
+    def _reached_first_node(self) -> None:
+        if self.order is not None and self.order.nodes:
+            self.last_node_id = self.order.nodes[0].node_id
+            self.last_node_seq = self.order.nodes[0].sequence_id
+
+    def instant(self, action: v.Action) -> None:
+        """`rmcMission` as an instant action: the same mission, with no order around it."""
+        if self.active:
+            self.agent._set_action(action, v.FAILED, "an order or mission is already running: "
+                                   "cancel it first (cancelOrder)")
+            return
+        if not self.autonomy.connected:
+            self.agent._set_action(action, v.FAILED, f"the autonomy at {self.autonomy.address} "
+                                   f"is not reachable ({self.autonomy.fault})")
+            return
+        self.agent.actions.pop(action.action_id, None)  # reported below, as the order's
+        self.order = v.Order("", 0, [], [])
+        self._seq_at_receive = self.agent.status_seq
+        self.action = action
+        self.action_status, self.result = v.WAITING, "waiting for control to be free"
+        self.dispatched = False
 
     def on_pause(self) -> None:
         """The fleet paused the robot: the autonomy holds (the agent sent it `pause`)."""

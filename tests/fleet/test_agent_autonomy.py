@@ -164,3 +164,23 @@ def test_order_runs_the_mission_and_a_dead_agent_stops_it(
         op.close()
         stop_process(agent)
         col.close()
+
+
+def test_rmc_mission_as_an_instant_action(sim: SimMission, mosquitto: LocalBroker,
+                                          tmp_path: Path) -> None:
+    col = Collector(mosquitto.host, mosquitto.port, [f"uagv/v2/RAMP/{SERIAL}/#"])
+    agent = start_agent("ramp.yaml", f"{sim.mcp[0]}:{sim.mcp[1]}", mosquitto.address, SERIAL,
+                        str(tmp_path), "--autonomy", sim.commands)
+    try:
+        col.wait_for("/state", lambda m: bool(info(m, "missionState")), timeout=20)
+        col.client.publish(v.topic("RAMP", SERIAL, "instantActions"), json.dumps(
+            v.instant_actions(v.Headers("RAMP", SERIAL), [v.action("rmcMission", "i1")])))
+        running = col.wait_for("/state", lambda m: (action(m, "i1") or {}).get(
+            "actionStatus") == "RUNNING" and m["operatingMode"] == "SEMIAUTOMATIC",
+            timeout=20)
+        assert running["orderId"] == "" and running["nodeStates"] == []
+        assert [a["actionId"] for a in running["actionStates"]].count("i1") == 1
+        validate("state", running)
+    finally:
+        stop_process(agent)
+        col.close()

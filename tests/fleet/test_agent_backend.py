@@ -84,6 +84,11 @@ def test_messages_validate_and_stop_pause_holds(robot: tuple[str, int], mosquitt
             e["errorType"] == "orderError" for e in m["errors"]))
         err = next(e for e in refused["errors"] if e["errorType"] == "orderError")
         assert "autonomy" in err["errorDescription"]
+        send(master, "instantActions", v.instant_actions(h, [v.action("rmcMission", "m0")]))
+        no_mission = master.wait_for("/state", lambda m: any(
+            a["actionId"] == "m0" and a["actionStatus"] == "FAILED" for a in m["actionStates"]))
+        assert "no autonomy" in next(a["resultDescription"] for a in no_mission["actionStates"]
+                                     if a["actionId"] == "m0")
         validate("state", refused)
         # The pause is kept across an agent restart.
         stop_process(agent)
