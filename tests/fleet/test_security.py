@@ -139,3 +139,37 @@ def test_init_command_refuses_bad_names(tmp_path: Path,
     assert main(["fleet", "init", str(tmp_path / "f"), "--robots", "a/b"]) == 2
     assert "not a name" in capsys.readouterr().err
     assert not (tmp_path / "f").exists()
+
+
+def test_the_agent_speaks_tls_with_its_own_identity(fleet: tuple[FleetFiles, LocalBroker],
+                                                    tmp_path: Path) -> None:
+    """A robot's agent configured by its `fleet.tls` reaches the TLS broker as r1 and is
+    heard; the same agent calling itself r2 (another robot's topics) is heard by nobody."""
+    import subprocess
+
+    from tests.fleet_fixtures import start_agent
+    from tests.harness import start_ramp, stop_process
+
+    files, broker = fleet
+    crt, key = files.clients["r1"]
+    cfg = tmp_path / "r1.yaml"
+    cfg.write_text(Path("ramp.yaml").read_text() + (
+        f"\nfleet:\n  serial: r1\n  broker: {broker.address}\n"
+        f"  tls: {{ca: {files.tls.ca}, cert: {crt}, key: {key}}}\n"))
+    proc, host, port = start_ramp(["--sim", "--host", "127.0.0.1", "--port", "0"],
+                                  stderr=subprocess.DEVNULL)
+    sup = Collector(broker.host, broker.port, ["uagv/v2/#"], client_id="sup-tls",
+                    tls=tls_of(files, "sup"))
+    agent = start_agent(str(cfg), f"{host}:{port}", broker.address, "r1", str(tmp_path))
+    try:
+        sup.wait_for("/r1/connection", lambda m: m["connectionState"] == "ONLINE")
+        sup.wait_for("/r1/state", lambda m: True)
+        stop_process(agent)
+        # r1's certificate, r2's serial: its connection, state and will go nowhere.
+        agent = start_agent(str(cfg), f"{host}:{port}", broker.address, "r2", str(tmp_path))
+        time.sleep(2.0)
+        assert sup.json("/r2/state") == [] and sup.json("/r2/connection") == []
+    finally:
+        stop_process(agent)
+        sup.close()
+        stop_process(proc)
