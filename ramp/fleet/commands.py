@@ -40,6 +40,7 @@ def add_init(sub: SubParsers) -> None:
 
 
 def cmd_init(args: argparse.Namespace) -> int:
+    from ramp.certs.authority import CertError
     from ramp.fleet.init import check_names, write_fleet
 
     problems = check_names(args.robots, args.supervisors)
@@ -52,7 +53,7 @@ def cmd_init(args: argparse.Namespace) -> int:
     try:
         files = write_fleet(args.dir, args.robots, args.supervisors, hosts=args.host,
                             port=args.port, manufacturer=args.manufacturer)
-    except (OSError, ValueError, RuntimeError) as exc:
+    except (OSError, ValueError, RuntimeError, CertError) as exc:
         print(f"ramp fleet init: {exc}", file=sys.stderr)
         return 1
     d = files.directory

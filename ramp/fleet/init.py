@@ -73,7 +73,8 @@ def acl_text(robots: list[str], supervisors: list[str], manufacturer: str = "+")
 def write_fleet(directory: Path, robots: list[str], supervisors: list[str], *,
                 hosts: list[str], port: int = 8883, listen: str = "0.0.0.0",
                 manufacturer: str = "+") -> FleetFiles:
-    """Write the whole set into `directory` (created; existing files are replaced)."""
+    """Write the whole set into `directory` (created): certificates that exist are kept,
+    `mosquitto.conf` and `acl` are written anew for the names given."""
     from ramp.certs.authority import create_ca, issue_client, issue_server
 
     problems = check_names(robots, supervisors)
@@ -81,10 +82,17 @@ def write_fleet(directory: Path, robots: list[str], supervisors: list[str], *,
         raise ValueError("; ".join(problems))
     directory.mkdir(parents=True, exist_ok=True)
     d = directory.resolve()
-    create_ca(d, "ramp-fleet-ca")
-    issue_server(d, "broker", hosts)
+    # Run again with a new robot, it adds that robot: the CA and the identities already
+    # issued are kept (ramp.certs never overwrites a certificate); the ACL is rewritten.
+    if not (d / "ca.crt").exists():
+        create_ca(d, "ramp-fleet-ca")
+    if not (d / "broker.crt").exists():
+        issue_server(d, "broker", hosts)
     clients = {}
     for name in [*robots, *supervisors]:
+        if (d / f"{name}.crt").exists() and (d / f"{name}.key").exists():
+            clients[name] = (d / f"{name}.crt", d / f"{name}.key")
+            continue
         crt, key = issue_client(d, name)
         clients[name] = (Path(crt), Path(key))
     acl = d / "acl"

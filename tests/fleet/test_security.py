@@ -173,3 +173,21 @@ def test_the_agent_speaks_tls_with_its_own_identity(fleet: tuple[FleetFiles, Loc
         stop_process(agent)
         sup.close()
         stop_process(proc)
+
+
+def test_init_again_adds_a_robot_and_keeps_the_ca(tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    from ramp.cli import main
+
+    d = tmp_path / "fleet"
+    assert main(["fleet", "init", str(d), "--robots", "m1", "--supervisors", "ops"]) == 0
+    out = capsys.readouterr().out
+    assert f"tls: {{ca: {d}/ca.crt, cert: {d}/m1.crt, key: {d}/m1.key}}" in out
+    ca, m1 = (d / "ca.crt").read_bytes(), (d / "m1.crt").read_bytes()
+    assert (d / "m1.key").stat().st_mode & 0o077 == 0
+    conf = (d / "mosquitto.conf").read_text()
+    assert "require_certificate true" in conf and "use_identity_as_username true" in conf
+    assert "allow_anonymous false" in conf and f"acl_file {d}/acl" in conf
+    assert main(["fleet", "init", str(d), "--robots", "m1", "m2", "--supervisors", "ops"]) == 0
+    assert (d / "ca.crt").read_bytes() == ca and (d / "m1.crt").read_bytes() == m1
+    assert "user m2" in (d / "acl").read_text() and (d / "m2.crt").exists()
