@@ -263,6 +263,12 @@ def build_parser() -> argparse.ArgumentParser:
     from ramp.recorder.logcli import add_log_parser  # `ramp log summary|plot FILE.mcap`
 
     add_log_parser(sub)
+    from ramp.certs.cli import add_certs_parser  # `ramp certs init|issue|list` (SPEC 13)
+
+    add_certs_parser(sub)
+    from ramp.fleet.commands import add_fleet_parser  # `ramp fleet init|...` (SPEC 14)
+
+    add_fleet_parser(sub)
     return parser
 
 

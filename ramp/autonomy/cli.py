@@ -97,6 +97,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help="stream the autonomy's view live to Foxglove (WebSocket, "
                              "foxglove.websocket.v1) on 127.0.0.1:P; 0 picks a free port, "
                              "printed (needs the `foxglove` extra)")
+    parser.add_argument("--command-port", type=int, default=None, metavar="P",
+                        help="serve the command endpoint for the fleet agent on 127.0.0.1:P "
+                             "(0 picks one; SPEC 14): the mission then waits for the "
+                             "fleet's rmcMission")
     parser.add_argument("--foxglove-origin", action="append", default=[], metavar="ORIGIN",
                         type=web_origin,
                         help="a web page's origin allowed to open the live view besides "
@@ -161,13 +165,19 @@ def cmd_run(args: argparse.Namespace) -> int:
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     for note in tunable_notes(cfg):
         logging.getLogger("ramp.autonomy").warning("%s: %s", args.config, note)
+    if args.command_port is not None and not 0 <= args.command_port <= 65535:
+        print(f"ramp-autonomy: --command-port: expected 0-65535, got {args.command_port}",
+              file=sys.stderr)
+        return 2
     return run_on_robot(cfg, backend, start_box=args.start_box, foxglove_port=port,
-                        foxglove_origins=args.foxglove_origin)
+                        foxglove_origins=args.foxglove_origin,
+                        command_port=args.command_port)
 
 
 def run_on_robot(cfg: AutonomyConfig, backend: tuple[str, int], *,
                  start_box: str | None = None, foxglove_port: int | None = None,
-                 foxglove_origins: Sequence[str] = ()) -> int:
+                 foxglove_origins: Sequence[str] = (),
+                 command_port: int | None = None) -> int:
     """The mission on real hardware, on the wall clock, until done or a signal."""
     from ramp.autonomy.executive.autonomy import Autonomy
     from ramp.autonomy.hal import driver_class
@@ -211,6 +221,23 @@ def run_on_robot(cfg: AutonomyConfig, backend: tuple[str, int], *,
     if live is not None:  # after the mission's task, so each sample sees that tick's work
         view = AutonomyView.watching(live, autonomy)
         scheduler.add_task("autonomy.view", VIEW_HZ, view.tick)
+    commands = None
+    if command_port is not None:  # the fleet agent's way in (ramp/autonomy/command.py)
+        from ramp.autonomy.command import CommandEndpoint
+
+        tracker = autonomy.kit.tracker
+        try:
+            commands = CommandEndpoint(autonomy.mission, pose=tracker.estimate,
+                                       confidence=lambda: tracker.confidence, now=clock.now,
+                                       port=command_port)
+        except OSError as exc:
+            print(f"ramp-autonomy: --command-port: {exc}", file=sys.stderr)
+            autonomy.close()
+            perception.close()
+            return 2
+        scheduler.add_task("autonomy.commands", 20.0, commands.tick)
+        print("ramp-autonomy: commands on {}:{} (the mission waits for rmcMission)".format(
+            *commands.address), flush=True)
     stopping: list[str] = []
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
@@ -230,6 +257,8 @@ def run_on_robot(cfg: AutonomyConfig, backend: tuple[str, int], *,
             end = clock.now() + STOP_FLUSH_S
             scheduler.run(lambda: clock.now() >= end)
     finally:
+        if commands is not None:
+            commands.close()
         if view is not None:
             view.close()
         autonomy.close()

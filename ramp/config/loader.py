@@ -37,6 +37,7 @@ from ramp.common.yamlload import (
 )
 from ramp.config.interlocks import check_interlocks
 from ramp.errors import ConfigError, ConfigErrors
+from ramp.fleetconf import problems as fleet_problems
 from ramp.hal import driver_class
 from ramp.hal.interfaces import Bus
 from ramp.layers.module_distribution import Module
@@ -201,6 +202,9 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
         root = parse_mapping(text, "a mapping of sections")
     except YamlError as exc:
         return None, [ConfigError(exc.problem, file=name, line=exc.line)]
+    # SPEC 14: `fleet:` is checked here and used by ramp-fleet-agent (ramp/fleetconf.py).
+    fleet = root.pop("fleet", None) if isinstance(root, dict) else None
+
     c = _Checker(name)
     _report_bad_keys(c, root)
     top = {"server", "watchdog", "scheduler", "buses", "modules", "recorder", "interlocks"}
@@ -216,6 +220,9 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
     sched = c.block(root, "scheduler", "scheduler", SCHEDULER_FIELDS)
     _check_watchdog_tick(c, root, wd["timeout"], sched["rate_hz"])
     recorder = _recorder(c, root, name)
+    if fleet is not None:
+        for key, line, message in fleet_problems(fleet):
+            c.err(key, line, message)
     buses, bus_classes = _buses(c, root)
     modules_errors = len(c.errors)
     modules = _modules(c, root, buses, bus_classes)

@@ -89,6 +89,9 @@ class MissionOptions:
     #: With realtime: the backend and the simulator on the autonomy's loop, in this process
     #: (realtime before issue 23; kept to measure the difference, `bench realtime`).
     single_loop: bool = False
+    #: With realtime: serve the autonomy's command endpoint (SPEC 14) on this loopback port
+    #: (0 picks one); the mission then waits for a supervisor's rmcMission.
+    command_port: int | None = None
 
 
 @dataclass
@@ -138,6 +141,7 @@ class MissionRun:
         self.config = mission_config(load_autonomy_config(o.config), o.duration)
         self.error = ""
         self.stop_requested = False  # `request_stop()`: end the run at the next tick
+        self.commands: Any = None  # with `command_port`: the autonomy's command endpoint
         self.wall_s = 0.0
         self.started_at = math.nan
         self.ended_at = math.nan
@@ -218,6 +222,20 @@ class MissionRun:
         self.autonomy = Autonomy(scheduler, self.perception, cfg, arena.mcp_address,
                                  localize=self.localize, detect=self.detect)
         self.autonomy.mission.add_listener(self._changed)
+        self._command_endpoint()
+
+    def _command_endpoint(self) -> None:
+        """`command_port`: the supervisor's way in (ramp/autonomy/command.py)."""
+        if self.options.command_port is None or self.autonomy is None:
+            return
+        from ramp.autonomy.command import CommandEndpoint
+
+        assert self.scheduler is not None and self.clock is not None
+        tracker = self.autonomy.kit.tracker
+        self.commands = CommandEndpoint(self.autonomy.mission, pose=tracker.estimate,
+                                        confidence=lambda: tracker.confidence,
+                                        now=self.clock.now, port=self.options.command_port)
+        self.scheduler.add_task("autonomy.commands", 20.0, self.commands.tick)
 
     def run(self) -> dict[str, Any]:
         """Run to the end; the summary. Exceptions end the run as `error`."""
@@ -235,11 +253,11 @@ class MissionRun:
             self.started_at = clock.now()
             self._notify("started")
             self.autonomy.start(self.started_at)
-            end = self.started_at + self.options.duration + END_GRACE_S
             mission = self.autonomy.mission
             waiting_ends = not self.options.realtime
 
-            def over() -> bool:
+            def over() -> bool:  # the budget's end: a commanded mission starts it later
+                end = mission.context.budget.end_s + END_GRACE_S
                 return (mission.over or self.stop_requested or clock.now() >= end
                         or (waiting_ends and mission.state == "waiting_for_operator"))
 
@@ -286,6 +304,8 @@ class MissionRun:
                 steps.callback(self.backend.close)
             if self.autonomy is not None:
                 steps.callback(self.autonomy.close)
+            if self.commands is not None:
+                steps.callback(self.commands.close)
 
     def _finish_arena(self) -> None:
         assert self.arena is not None

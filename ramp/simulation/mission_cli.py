@@ -75,6 +75,10 @@ def add_mission_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser])
                    help="stream the same channels live to Foxglove over its WebSocket "
                         "protocol on 127.0.0.1:P (0 picks a free port; printed); best with "
                         "--realtime")
+    p.add_argument("--command-port", type=int, default=None,
+                   help="with --realtime: the autonomy's command endpoint for a fleet agent "
+                   "(JSON lines on loopback; 0 picks a port); the mission then waits for "
+                   "the fleet's rmcMission")
     p.add_argument("--realtime", action="store_true",
                    help="run on the wall clock and serve MCP (see --port) so an operator "
                         "can watch with ramp-shell or ramp-teleop and take over; the robot "
@@ -120,6 +124,11 @@ def _mission(args: argparse.Namespace) -> int:
                          "a loopback port of its own)")
     if args.port is not None and not 0 <= args.port <= 65535:
         raise UsageError(f"--port: expected 0-65535, got {args.port}")
+    if args.command_port is not None and not args.realtime:
+        raise UsageError("--command-port: only with --realtime (a fleet supervises robots "
+                         "on the wall clock)")
+    if args.command_port is not None and not 0 <= args.command_port <= 65535:
+        raise UsageError(f"--command-port: expected 0-65535, got {args.command_port}")
     if args.single_loop and not args.realtime:
         raise UsageError("--single-loop: only with --realtime")
     if args.foxglove_port is not None and not 0 <= args.foxglove_port <= 65535:
@@ -130,7 +139,7 @@ def _mission(args: argparse.Namespace) -> int:
     options = MissionOptions(seed=args.seed, start_box=box, heading=heading, fault=args.fault,
                              duration=args.duration, world=args.world, config=args.config,
                              realtime=args.realtime, randomize=args.randomize,
-                             single_loop=args.single_loop,
+                             single_loop=args.single_loop, command_port=args.command_port,
                              port=(REALTIME_PORT if args.port is None else args.port)
                              if args.realtime else 0)
     no_plot = plot_unavailable(args.plot)
@@ -172,6 +181,10 @@ def _mission(args: argparse.Namespace) -> int:
             print(f"ramp sim mission: running on the wall clock; MCP on {host}:{port} "
                   f"(watch: ramp-shell {host}:{port}; take over: "
                   "robot:control.acquire=(operator)); Ctrl-C ends the run", flush=True)
+            if run.commands is not None:
+                chost, cport = run.commands.address
+                print(f"ramp sim mission: autonomy commands on {chost}:{cport} (the mission "
+                      "waits for rmcMission)", flush=True)
             if run.arena is not None:
                 print(f"ramp sim mission: the robot and the arena run in process "
                       f"{run.arena.pid}, the autonomy in process {os.getpid()}", flush=True)

@@ -134,6 +134,9 @@ class Mission:
         self._step_retries = 0
         self._retry_step: str | None = None  # the task whose finish resets the counters
         self._observed_owner: str | None = None
+        #: Why a supervisor (the fleet) holds the mission paused; None when it does not.
+        self.held: str | None = None
+        self._held_pause = False  # the pause is the hold's, not an operator's
         self._pending_fault: str | None = None
         self._out_since: float | None = None
         self._home_since: float | None = None
@@ -189,6 +192,17 @@ class Mission:
         late could still name us after an operator took over). Feed it from the connection
         the activities command on, so its answers arrive in order with theirs."""
         self._observed_owner = owner
+
+    def hold(self, reason: str) -> None:
+        """A supervisor's pause (the fleet's stopPause): acted on at the next tick like an
+        operator's takeover (the mission stops commanding and waits in `paused`), and kept
+        whoever owns control until `release_hold`."""
+        self.held = reason
+
+    def release_hold(self) -> None:
+        """End the supervisor's pause: the mission resumes as after a takeover (re-acquire,
+        re-localize) unless an operator holds control, whose release it then waits for."""
+        self.held = None
 
     def report_fault(self, reason: str) -> None:
         """A fault seen outside any activity (watchdog tripped, link lost); acted on at the
@@ -371,6 +385,26 @@ class Mission:
                 self._fire(status.trigger, status.reason)
 
     def _check_control(self) -> bool:
+        if self.held is not None:
+            if self.state == "paused":
+                owner, self._observed_owner = self._observed_owner, None
+                if owner is not None:
+                    self.context.control_owner = owner
+                return True
+            if self._accepts("control_taken"):
+                self._held_pause = True
+                self._halt()  # no operator's acquire stopped it: the hold stops what we run
+                self._fire("control_taken", f"held by a supervisor: {self.held}")
+                return True
+        elif self._held_pause:
+            # The hold ended: resume if control is free or still ours; under an operator's
+            # control, wait for its release as after any takeover.
+            if self.state != "paused":
+                self._held_pause = False
+            elif self.context.control_owner in (NO_OWNER, self.owner_name):
+                self._held_pause = False
+                self._fire("control_free", "the supervisor's hold ended")
+                return True
         owner, self._observed_owner = self._observed_owner, None
         if owner is None:
             return False
