@@ -28,6 +28,7 @@ from typing import Any, Protocol
 from ramp.errors import RequestError
 from ramp.layers.module_distribution import Function, Module
 from ramp.layers.module_distribution.router import Version, answer
+from ramp.layers.robot_distribution.access import forbidden
 from ramp.layers.robot_distribution.context import Client, RequestContext
 from ramp.layers.robot_distribution.control import Control
 from ramp.layers.robot_distribution.interlocks import Interlocks
@@ -103,7 +104,7 @@ class RobotRequests(Module):
                    ("watchdog", "timeout", "float", "s"), ("watchdog", "state", "name", ""),
                    ("watchdog", "commanders", "int", ""),
                    ("control", "owner", "name", ""), ("clients", "count", "int", ""),
-                   ("interlock", "active", "name", ""))
+                   ("interlock", "active", "name", ""), ("access", "me", "name", ""))
 
     def describe(self) -> list[Response]:
         out = [Response("robot", "robot", "module", (name,)) for name in self.layer.slots]
@@ -117,6 +118,8 @@ class RobotRequests(Module):
                                 (prop, kind, unit) if unit else (prop, kind)))
         out.extend(Response("robot", name, "property", ("state", "name"))
                    for name in self.layer.slots)
+        if self.layer.access_mode is not None:
+            out.append(Response("robot", "access", "property", ("mode", "name")))
         if self.layer.recording():
             out.append(Response("robot", "recorder", "property", ("dropped", "int")))
         out.extend(Response("robot", fn.device, "kind", (fn.name, fn.kind))
@@ -157,6 +160,9 @@ class RobotDistribution:
         self.extra: dict[str, Module] = {}
         #: Observer hook (the flight recorder): None costs nothing.
         self.on_control: ControlHook | None = None
+        #: `robot:access.mode` (SPEC 13): "anonymous" when MCP is open to the network with
+        #: no authentication (`access.allow_anonymous`), else None (no row).
+        self.access_mode: str | None = None
 
     @property
     def version(self) -> Version:
@@ -196,6 +202,10 @@ class RobotDistribution:
             if line is not None:
                 return line((self._ticks.ticks, self.changes))
             return answer(fn.run(ctx, *values) if fn.takes_context else fn.run(*values))
+        if ctx.client.role != "admin":  # SPEC 13: what the sender's role permits
+            refusal = forbidden(ctx.client.role, kind, module in self.extra)
+            if refusal is not None:
+                return _error(req, "forbidden", refusal)
         if (kind == "motion" or kind == "state") and not self.control.may_command(ctx.client):
             return _error(req, "not_owner", f"control is held by {self.control.owner_name}")
         interlocks = self.interlocks
@@ -250,6 +260,9 @@ class RobotDistribution:
 
     def acquire(self, ctx: RequestContext, name: str) -> None:
         client = ctx.client
+        if client.tls and name != client.identity:  # SPEC 13: nobody poses as another
+            raise RequestError("forbidden", f"you are {client.identity}: acquire as "
+                               f"{client.identity}, not {name}")
         previous = self.control.owner_name
         if self.control.acquire(client, name):
             self.stop_all(f"control acquired by {name}", ctx.now)
@@ -388,6 +401,10 @@ class RobotDistribution:
         rows.append(Response("robot", "interlock", "active", active or ("none",)))
         rows.extend(Response("robot", name, "state", (slot.state,))
                     for name, slot in self.slots.items())
+        if client is not None:
+            rows.append(Response("robot", "access", "me", (client.identity, client.role)))
+        if self.access_mode is not None:
+            rows.append(Response("robot", "access", "mode", (self.access_mode,)))
         if h.recorder_dropped is not None:
             rows.append(Response("robot", "recorder", "dropped", (h.recorder_dropped,)))
         return rows
