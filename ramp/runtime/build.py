@@ -130,6 +130,9 @@ def _connect(sup: Supervisor, observer: Observer) -> None:
                 t, module, state, reason)
     if overridden(observer, "watchdog"):
         sup.watchdog.on_change = lambda state, why, t: observer.watchdog(t, state, why)
+    if overridden(observer, "audit"):
+        sup.robot.on_audit = lambda client, req, outcome, t: observer.audit(
+            t, client, req, outcome)
     if overridden(observer, "interlock"):
         sup.robot.interlocks.on_change = lambda name, active, why, t: observer.interlock(
             t, name, active, why)

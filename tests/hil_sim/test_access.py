@@ -292,7 +292,7 @@ def test_half_open_and_trickled_handshakes_hold_no_slot_and_expire(pki: Path) ->
     assert not server.clients
     ana = as_(h, pki, "ana")  # an honest handshake still gets through
     assert ana.ask("demo:motor.vel=(30)") == ""
-    for second in range(3):
+    for _ in range(3):
         trickle.send(b"\x03")
         h.advance(1.0)
         assert ana.ask("") == ""
@@ -374,3 +374,48 @@ def test_anonymous_mode_is_loud(tmp_path: Path, caplog: pytest.LogCaptureFixture
         assert "robot:access.me=(local,admin)" in answer
     finally:
         h.close()
+
+
+def test_who_drove_is_audited_per_identity(pki: Path) -> None:
+    """Every state-changing request, accepted or refused, reaches the recorder's audit with
+    its sender's identity and address; `ramp log summary` counts them per identity."""
+    from ramp.recorder.schemas import TOPIC_EVENTS
+    from ramp.recorder.summary import Summary, format_report
+    from ramp.runtime.observers import Observer
+
+    seen: list[tuple[str, str, str, str]] = []
+
+    class Audit(Observer):
+        def audit(self, t, client, request, outcome):  # type: ignore[no-untyped-def]
+            from ramp.mcp.protocol import format_request
+            seen.append((client.identity, client.peer, outcome, format_request(request)))
+
+    h = Harness(access_yaml(pki), observer=Audit())
+    try:
+        ana, mon = as_(h, pki, "ana"), as_(h, pki, "mon")
+        assert ana.ask("demo:motor.vel=(20)robot:control.acquire=(ana)") == ""
+        mon.ask("demo:lamp.on=(1)")
+        bea = as_(h, pki, "bea")
+        bea.ask("demo:motor.vel=(5)")  # not_owner
+        assert bea.ask("robot:robot.stop=()") == ""
+        assert mon.ask("robot:robot.get=()")  # a read: not audited
+    finally:
+        h.close()
+    outcomes = [(who, outcome, req) for who, _, outcome, req in seen]
+    assert outcomes == [("ana", "accepted", "demo:motor.vel=(20)"),
+                        ("ana", "accepted", "robot:control.acquire=(ana)"),
+                        ("mon", "forbidden", "demo:lamp.on=(1)"),
+                        ("bea", "not_owner", "demo:motor.vel=(5)"),
+                        ("bea", "accepted", "robot:robot.stop=()")]
+    assert all(peer.startswith("127.0.0.1:") for _, peer, _, _ in seen)
+    summary = Summary()
+    for i, (who, peer, outcome, req) in enumerate(seen):
+        summary.add((TOPIC_EVENTS, i, {"kind": "audit", "text": f"{who} {peer} {outcome} {req}"}))
+    report = summary.report()
+    assert report["identities"]["ana"]["commands"] == 1
+    assert report["identities"]["ana"]["acquires"] == 1
+    assert report["identities"]["mon"]["refusals"] == 1
+    assert report["identities"]["bea"] == {"commands": 1, "acquires": 0, "takeovers": 0,
+                                           "resets": 0, "refusals": 1,
+                                           "addresses": ["127.0.0.1"]}
+    assert "identity   mon from 127.0.0.1: 0 commands" in format_report(report)

@@ -42,6 +42,9 @@ log = logging.getLogger("ramp.robot")
 
 #: Observer hook: (owner name or "none", the client's peer, clock time) when control changes.
 ControlHook = Callable[[str, str, float], None]
+#: Observer hook (SPEC 13, audit): (client, request, "accepted" or the refusal's code, clock
+#: time) for every state-changing request, accepted or refused.
+AuditHook = Callable[[Client, Request, str, float], None]
 
 
 @dataclass(frozen=True)
@@ -163,6 +166,8 @@ class RobotDistribution:
         #: `robot:access.mode` (SPEC 13): "anonymous" when MCP is open to the network with
         #: no authentication (`access.allow_anonymous`), else None (no row).
         self.access_mode: str | None = None
+        #: Observer hook (the flight recorder's audit): None costs nothing.
+        self.on_audit: AuditHook | None = None
 
     @property
     def version(self) -> Version:
@@ -202,21 +207,30 @@ class RobotDistribution:
             if line is not None:
                 return line((self._ticks.ticks, self.changes))
             return answer(fn.run(ctx, *values) if fn.takes_context else fn.run(*values))
+        audit = self.on_audit
         if ctx.client.role != "admin":  # SPEC 13: what the sender's role permits
             refusal = forbidden(ctx.client.role, kind, module in self.extra)
             if refusal is not None:
+                if audit is not None:
+                    audit(ctx.client, req, "forbidden", ctx.now)
                 return _error(req, "forbidden", refusal)
         if (kind == "motion" or kind == "state") and not self.control.may_command(ctx.client):
+            if audit is not None:
+                audit(ctx.client, req, "not_owner", ctx.now)
             return _error(req, "not_owner", f"control is held by {self.control.owner_name}")
         interlocks = self.interlocks
         if kind == "motion" and interlocks.guards:
             refusal = interlocks.permit(module, fn, values, ctx.now)
             if refusal is not None:
+                if audit is not None:
+                    audit(ctx.client, req, "interlocked", ctx.now)
                 return _error(req, "interlocked", refusal)
         self.changes += 1
         try:
             result = fn.run(ctx, *values) if fn.takes_context else fn.run(*values)
         except RequestError as exc:
+            if audit is not None:
+                audit(ctx.client, req, exc.code, ctx.now)
             return _error(req, exc.code, exc.detail)
         except Exception as exc:
             log.exception("request %s:%s.%s failed", req.module, req.device, req.function)
@@ -229,6 +243,8 @@ class RobotDistribution:
             self.watchdog.command(module, ctx.client, ctx.now, self.any_moving())
         elif kind == "stop" and not self.any_moving():
             self.watchdog.disarm(ctx.now)
+        if audit is not None:
+            audit(ctx.client, req, "accepted", ctx.now)
         return answer(result) if result else b""
 
     def _unusable(self, req: Request, slot: ModuleSlot | None) -> bytes:
