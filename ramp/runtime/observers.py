@@ -51,7 +51,7 @@ if TYPE_CHECKING:
 
 #: The methods `build` connects when a subclass overrides them.
 POINTS = ("message_in", "message_out", "command", "module_state", "watchdog", "control",
-          "interlock", "stall", "bus_fault", "tick", "tick_done")
+          "interlock", "audit", "stall", "bus_fault", "tick", "tick_done")
 
 
 class Observer:
