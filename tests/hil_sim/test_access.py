@@ -419,3 +419,55 @@ def test_who_drove_is_audited_per_identity(pki: Path) -> None:
                                            "resets": 0, "refusals": 1,
                                            "addresses": ["127.0.0.1"]}
     assert "identity   mon from 127.0.0.1: 0 commands" in format_report(report)
+
+
+def test_a_reload_revokes_at_once_and_keeps_everyone_else(h: Harness, pki: Path) -> None:
+    """SIGHUP's reload (SPEC 13): a newly revoked client is dropped at once (its motion
+    stops with it, as any lost commander's), the others stay, with their new roles."""
+    from dataclasses import replace
+
+    ana, bea = as_(h, pki, "ana"), as_(h, pki, "bea")
+    assert bea.ask("robot:watchdog.timeout=(60)demo:motor.vel=(30)") == ""
+    h.advance(0.05)
+    assert h.world.motors["demo.motor"] != 0.0
+    access = h.config.access
+    identities = {**access.identities, "ana": "observer"}
+    dropped = h.sup.server.reload_access(
+        replace(access, identities=identities, revoked=frozenset({serial_of(pki / "bea.crt")})),
+        None)
+    assert len(dropped) == 1
+    assert "forbidden,its certificate is revoked" in bea.line()
+    h.advance(0.05)
+    assert h.world.motors["demo.motor"] == 0.0  # its commander is gone: the watchdog tripped
+    assert "robot:access.me=(ana,observer)" in ana.ask("robot:robot.get=()")
+    assert "forbidden" in ana.ask("demo:motor.vel=(10)")
+
+
+def test_sighup_reloads_access_in_a_running_robot(pki: Path, tmp_path: Path) -> None:
+    import signal
+    import time
+
+    from tests.harness import ask_line, start_ramp, stop_process
+
+    config = tmp_path / "robot.yaml"
+    config.write_text(access_yaml(pki))
+    proc, host, port = start_ramp(["--sim", "--config", str(config)])
+    try:
+        ctx = client_context(pki / "ca.crt", pki / "ana.crt", pki / "ana.key")
+        with ctx.wrap_socket(socket.create_connection(("127.0.0.1", port)),
+                             server_hostname="127.0.0.1") as ana:
+            assert "access.me=(ana,operator)" in ask_line(ana, "robot:robot.get=()")
+            config.write_text(config.read_text().replace("ana: operator", "ana: observer"))
+            proc.send_signal(signal.SIGHUP)
+            for _ in range(100):
+                if "access.me=(ana,observer)" in ask_line(ana, "robot:robot.get=()"):
+                    break
+                time.sleep(0.05)
+            assert "access.me=(ana,observer)" in ask_line(ana, "robot:robot.get=()")
+            assert proc.poll() is None
+        proc.terminate()
+        _, err = proc.communicate(timeout=10)
+        assert "SIGHUP: access reloaded" in err
+    finally:
+        if proc.poll() is None:
+            stop_process(proc)
