@@ -27,6 +27,6 @@ AUTONOMY_SECTIONS: tuple[str, ...] = (
     if find_spec("ramp.autonomy") is not None else ())
 
 #: Benchmark names, in the order they run.
-SECTIONS = ("tick", "round_trip", "interlocks", "command_to_wire", "watchdog_to_wire", "startup",
-            "recorder",
+SECTIONS = ("tick", "round_trip", "tls", "interlocks", "command_to_wire", "watchdog_to_wire",
+            "startup", "recorder",
             "arena", *AUTONOMY_SECTIONS)

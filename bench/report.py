@@ -82,6 +82,19 @@ def render(doc: dict[str, Any]) -> str:
             out += [f"| {name} | {v['runs']:,} | {_num(v['mean_us'])} µs | "
                     f"{_num(v['max_us'])} µs |" for name, v in tasks.items()]
             out.append("")
+    t = doc.get("tls")
+    if t and "error" not in t:
+        f = t["flood"]
+        out += [f"**tls** (`{t['request']}` over mutual TLS; baseline: the same server over "
+                f"plain TCP, median of {t['trials']} trials)", "", HEAD]
+        out += _pcts("sequential RTT", t["rtt_us"], " µs")
+        out += ["", f"During {f['seconds']:g} s of bad handshakes ({f['attempts']} attempts): "
+                f"tick lateness p99 {_num(f['tick_late_us']['flood']['p99'])} µs (quiet: "
+                f"{_num(f['tick_late_us']['quiet']['p99'])} µs), max "
+                f"{_num(f['tick_late_us']['flood']['max'])} µs; an operator's connect + "
+                f"handshake + stop answered in p50 "
+                f"{_num(f['operator_connect_to_stop_ms']['p50'])} ms, max "
+                f"{_num(f['operator_connect_to_stop_ms']['max'])} ms.", ""]
     r = doc.get("round_trip")
     if r and "error" not in r:
         out += [f"**round_trip** (`{r['request']}`, {r['response_bytes']}-byte answer; "

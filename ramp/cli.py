@@ -161,6 +161,14 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
     # the process with the motors still commanded: every one of them stops the robot first.
     for signum in STOP_SIGNALS:
         signal.signal(signum, on_signal)
+    reloader = None
+    if config.access.configured or config.server.tls is not None:
+        # A deployed robot (SPEC 13): SIGHUP reloads `access` (systemd's ExecReload), as
+        # daemons do; without an access section it stops the robot like the others.
+        from ramp.runtime.access_reload import AccessReloader
+
+        reloader = AccessReloader(sup, config.file)
+        reloader.install()
     try:
         sup.start()
     except Exception as exc:  # noqa: BLE001 - whatever failed, the motors must be stopped
@@ -191,6 +199,8 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
     finally:
         notifier.stopping()
         guard.stop()
+        if reloader is not None:
+            reloader.close()
         sup.shutdown()
         if backplane is not None:
             backplane.close()

@@ -9,8 +9,9 @@
 #
 # What it does: a `ramp` system user in dialout and plugdev; the checkout copied to
 # /opt/ramp with its own venv (`pip install '/opt/ramp[phidget]'`); /etc/ramp/ramp.yaml
-# from ramp.yaml and scripts/ramp-service.yaml (the flight recorder) if absent (yours is
-# never overwritten); a udev rule giving plugdev the Phidgets (USB vendor 06c2); the unit
+# from ramp.yaml and scripts/ramp-service.yaml (MCP over mutual TLS, the flight recorder)
+# if absent (yours is never overwritten); the robot's CA and certificate in
+# /etc/ramp/certs if absent (`ramp certs init`); a udev rule giving plugdev the Phidgets (USB vendor 06c2); the unit
 # in /etc/systemd/system; daemon-reload; enable --now.
 set -euo pipefail
 
@@ -130,12 +131,32 @@ run mkdir -p "$CONF_DIR"
 if [ -e "$CONF_DIR/ramp.yaml" ]; then
     echo "    $CONF_DIR/ramp.yaml exists: kept as it is"
 else
-    # The robot's wiring, then what the service adds (the flight recorder, on).
-    run install -m 0644 "$SRC/ramp.yaml" "$CONF_DIR/ramp.yaml"
+    # The robot's wiring without its loopback-only server line, then what the service adds:
+    # MCP on every interface over mutual TLS with roles, and the flight recorder.
     if [ "$DRY_RUN" = 1 ]; then
+        printf "    grep -v '^server:' %s > %s\n" "$SRC/ramp.yaml" "$CONF_DIR/ramp.yaml"
         printf '    cat %s >> %s\n' "$SRC/scripts/ramp-service.yaml" "$CONF_DIR/ramp.yaml"
     else
-        { printf '\n'; cat "$SRC/scripts/ramp-service.yaml"; } >> "$CONF_DIR/ramp.yaml"
+        { grep -v '^server:' "$SRC/ramp.yaml"; printf '\n'
+          cat "$SRC/scripts/ramp-service.yaml"; } > "$CONF_DIR/ramp.yaml"
+        chmod 0644 "$CONF_DIR/ramp.yaml"
+    fi
+fi
+
+step "certificates $CONF_DIR/certs (mutual TLS on the MCP port)"
+if [ -e "$CONF_DIR/certs/ca.crt" ]; then
+    echo "    $CONF_DIR/certs has a CA: kept as it is"
+else
+    # The robot's CA and server certificate, for every name and address clients may use;
+    # issue clients with `ramp certs issue $CONF_DIR/certs NAME --role ROLE`.
+    if [ "$LIVE" = 1 ]; then RAMP=("$APP/.venv/bin/ramp"); else RAMP=("$PYTHON" -m ramp.cli); fi
+    HOSTS=(--host 127.0.0.1 --host "$(hostname)" --host "$(hostname).local")
+    for ip in $(hostname -I 2> /dev/null || true); do HOSTS+=(--host "$ip"); done
+    run env PYTHONPATH="$SRC" "${RAMP[@]}" certs init "$CONF_DIR/certs" "${HOSTS[@]}"
+    if [ "$LIVE" = 1 ]; then
+        # The service's user reads its own key; nobody else does.
+        run chgrp ramp "$CONF_DIR/certs/robot.key"
+        run chmod 0640 "$CONF_DIR/certs/robot.key"
     fi
 fi
 

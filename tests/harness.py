@@ -114,12 +114,13 @@ class TestClient:
 
 class Harness:
     def __init__(self, yaml_text: str = DEMO_YAML, world: Any = None,
-                 bus_factory: Any = None, observer: Any = None, recorder: Any = None) -> None:
+                 bus_factory: Any = None, observer: Any = None, recorder: Any = None,
+                 host: str = "127.0.0.1") -> None:
         self.clock = VirtualClock()
         self.world = world if world is not None else FakeWorld()
         self.config = config_from(yaml_text)
         self.sup = build(self.config, self.clock, bus_factory or self._bus,
-                         host="127.0.0.1", port=0, observer=observer, recorder=recorder)
+                         host=host, port=0, observer=observer, recorder=recorder)
         self.sup.start()
         self.clients: list[TestClient] = []
 

@@ -35,6 +35,7 @@ from ramp.common.yamlload import (
     parse_mapping,
     read_text,
 )
+from ramp.config.access import AccessConfig, TlsConfig, check_access, check_exposure, check_tls
 from ramp.config.interlocks import check_interlocks
 from ramp.errors import ConfigError, ConfigErrors
 from ramp.fleetconf import problems as fleet_problems
@@ -52,7 +53,7 @@ MODULE_NAME = re.compile(r"[A-Za-z0-9_]{1,32}")
 
 
 SERVER_FIELDS = {
-    "host": Field(str, "0.0.0.0", what="a host name or address"),
+    "host": Field(str, "127.0.0.1", what="a host name or address (loopback unless TLS)"),
     "port": Field(int, 5577, lo=0, hi=65535, what="a TCP port"),
     "max_clients": Field(int, 8, lo=1, hi=4096, what="a number of clients"),
     "max_line": Field(int, 4096, lo=64, hi=1 << 20, what="a message length in bytes"),
@@ -72,11 +73,13 @@ BUS_COMMON = {"driver", "sim"}
 
 @dataclass(frozen=True)
 class ServerConfig:
-    host: str = "0.0.0.0"
+    host: str = "127.0.0.1"
     port: int = 5577
     max_clients: int = 8
     max_line: int = 4096
     max_output: int = 1 << 20
+    #: `server.tls` (SPEC 13): mutual TLS on the MCP port; None serves plain TCP.
+    tls: TlsConfig | None = None
 
 
 @dataclass(frozen=True)
@@ -122,6 +125,8 @@ class Config:
     lines: Mapping[str, int] = field(default_factory=dict)
     #: The checked rules of `interlocks:` (SPEC 11), in file order.
     interlocks: tuple[RuleSpec, ...] = ()
+    #: `access:` (SPEC 13): roles, identities, revocations and per-client caps.
+    access: AccessConfig = AccessConfig()
 
 
 class _Checker:
@@ -207,15 +212,17 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
 
     c = _Checker(name)
     _report_bad_keys(c, root)
-    top = {"server", "watchdog", "scheduler", "buses", "modules", "recorder", "interlocks"}
+    top = {"server", "watchdog", "scheduler", "buses", "modules", "recorder", "interlocks",
+           "access"}
     for k in root:
         if k not in top:
             c.err(str(k), root.lines.get(k, 1),
                   f"unknown section (expected one of: {', '.join(sorted(top))})")
     for dup, dline in root.duplicates:
         c.err(str(dup), dline, "section given twice")
-    server = c.block(root, "server", "server", SERVER_FIELDS)
+    server = c.block(root, "server", "server", SERVER_FIELDS, skip={"tls"})
     _check_host(c, root, server)
+    tls, access = _access(c, root, name, server)
     wd = c.block(root, "watchdog", "watchdog", WATCHDOG_FIELDS)
     sched = c.block(root, "scheduler", "scheduler", SCHEDULER_FIELDS)
     _check_watchdog_tick(c, root, wd["timeout"], sched["rate_hz"])
@@ -232,7 +239,7 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
         return None, c.errors
     cfg = Config(
         file=name,
-        server=ServerConfig(**server),
+        server=ServerConfig(**server, tls=tls),
         watchdog_timeout=wd["timeout"],
         rate_hz=sched["rate_hz"],
         stall_limit=sched["stall_limit"],
@@ -241,8 +248,25 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
         recorder=recorder,
         lines=MappingProxyType({**_lines(root, "server"), **_lines(root, "recorder")}),
         interlocks=interlocks,
+        access=access,
     )
     return cfg, []
+
+
+def _access(c: _Checker, root: LinedMap, file: str,
+            server: dict[str, Any]) -> tuple[TlsConfig | None, AccessConfig]:
+    """`server.tls` and `access:` (SPEC 13); serving off loopback needs one of them."""
+    raw_server = root.get("server")
+    lines = raw_server.lines if isinstance(raw_server, LinedMap) else {}
+    base = Path(file).resolve().parent if file else Path.cwd()
+    raw_tls = raw_server.get("tls") if isinstance(raw_server, dict) else None
+    tls = check_tls(raw_tls, lines.get("tls", root.lines.get("server", 1)), base, c.err)
+    access = check_access(root.get("access"), root.lines.get("access", 1), c.err)
+    problem = check_exposure(server["host"], tls if raw_tls is None else
+                             (tls or TlsConfig("", "", "")), access)
+    if problem is not None:
+        c.err("server.host", lines.get("host", root.lines.get("server", 1)), problem)
+    return tls, access
 
 
 def _check_watchdog_tick(c: _Checker, root: LinedMap, timeout: float, rate_hz: float) -> None:

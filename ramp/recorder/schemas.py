@@ -52,6 +52,8 @@ EVENT_KINDS = {
     "stop": "robot.stop or a module stop request",
     "fault": "a bus fault (the module state change says which module it hit)",
     "recorder": "the recorder started dropping records, or could not write",
+    "audit": "a state-changing request: IDENTITY PEER OUTCOME REQUEST (accepted, or the "
+             "refusal's code: forbidden, not_owner, interlocked, fault ...)",
     "note": "anything else worth a mark on the time line",
 }
 

@@ -68,6 +68,10 @@ class Summary:
     events: Counter[str] = field(default_factory=Counter)
     #: Activations per interlock rule (SPEC 11), from the `interlock` events.
     interlocks: Counter[str] = field(default_factory=Counter)
+    #: Per identity (SPEC 13 audit): commands, acquires, takeovers, resets, refusals; and
+    #: the addresses it spoke from.
+    identities: dict[str, Counter[str]] = field(default_factory=dict)
+    addresses: dict[str, set[str]] = field(default_factory=lambda: defaultdict(set))
     overruns: list[int] = field(default_factory=list)
     late_max_us: float = 0.0
     battery: dict[str, list[float]] = field(default_factory=dict)
@@ -117,6 +121,8 @@ class Summary:
             self.events[kind] += 1
             if kind == "watchdog_trip":
                 self.trips_event.append(t)
+            elif kind == "audit":
+                self._audit(str(data.get("text", "")))
             elif kind == "interlock":  # "NAME active: ..." or "NAME released"
                 name, _, rest = str(data.get("text", "")).partition(" ")
                 if not rest.startswith("released"):
@@ -128,6 +134,26 @@ class Summary:
                 self.log_errors.append((t, str(data.get("message", ""))))
         elif topic.endswith("/get"):
             self._module_rows(topic[1:-4], t, data)
+
+    def _audit(self, text: str) -> None:
+        """`IDENTITY PEER OUTCOME REQUEST` (ramp.runtime.recording)."""
+        parts = text.split(" ", 3)
+        if len(parts) != 4:
+            return
+        identity, peer, outcome, request = parts
+        counts = self.identities.setdefault(identity, Counter())
+        self.addresses[identity].add(peer.rsplit(":", 1)[0])
+        if outcome != "accepted":
+            counts["refusals"] += 1
+        elif "control.acquire=" in request:
+            counts["acquires"] += 1
+            if self._owner not in (None, "none", identity) and not request.endswith(
+                    f"({self._owner})"):
+                counts["takeovers"] += 1
+        elif ".reset=" in request:
+            counts["resets"] += 1
+        else:
+            counts["commands"] += 1
 
     def _health(self, t: int, data: dict[str, Any]) -> None:
         wd = _get(data, "watchdog", "state")
@@ -214,6 +240,11 @@ class Summary:
                         for k, v in sorted(self.battery.items())},
             "events": dict(sorted(self.events.items())),
             "interlocks": dict(self.interlocks),
+            "identities": {who: {"commands": c["commands"], "acquires": c["acquires"],
+                                 "takeovers": c["takeovers"], "resets": c["resets"],
+                                 "refusals": c["refusals"],
+                                 "addresses": sorted(self.addresses[who])}
+                           for who, c in sorted(self.identities.items())},
             "log": {"warnings": self.log_levels[3], "errors": self.log_levels[4]
                     + self.log_levels[5],
                     "first_errors": [{"at_s": rel(t), "message": m}
@@ -262,6 +293,10 @@ def format_report(r: dict[str, Any]) -> str:
     lines.append("owners     " + (", ".join(
         f"{o['owner']} (from {o['since_s']:g} s, {o['held_s']:g} s)" for o in owners)
         if owners else "none (nobody acquired control)"))
+    for who, c in r.get("identities", {}).items():
+        lines.append(f"identity   {who} from {', '.join(c['addresses'])}: {c['commands']} "
+                     f"commands, {c['acquires']} acquires ({c['takeovers']} takeovers), "
+                     f"{c['resets']} resets, {c['refusals']} refusals")
     trips = r["watchdog_trips"]
     lines.append(f"watchdog   {len(trips)} trip{'s' if len(trips) != 1 else ''}"
                  + (f" (at {_times(trips)})" if trips else ""))

@@ -10,11 +10,14 @@ layers), the module registry, the watchdog and the robot layer, then the server.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from ramp.clock import Clock, MonotonicClock
 from ramp.config import BusConfig, Config
+from ramp.config.access import check_exposure, is_loopback, server_context
+from ramp.errors import ConfigError
 from ramp.hal import driver_class
 from ramp.hal.interfaces import Bus
 from ramp.layers.module_distribution import BoundDevice, Module
@@ -80,11 +83,22 @@ def build(config: Config, clock: Clock | None = None, bus_factory: BusFactory | 
     manager = BusManager(buses, scheduler, buses_changed)
     robot = RobotDistribution(registry, Watchdog(config.watchdog_timeout), health,
                               scheduler.stats, Interlocks(config.interlocks, slots))
-    server = McpServer(scheduler, robot,
-                       host=host if host is not None else config.server.host,
+    serve_on = host if host is not None else config.server.host
+    problem = check_exposure(serve_on, config.server.tls, config.access)
+    if problem is not None:  # `--host 0.0.0.0` on a file without TLS (SPEC 13)
+        raise ConfigError(problem, file=config.file, key="server.host",
+                          line=config.lines.get("server.host", 0))
+    tls = server_context(config.server.tls) if config.server.tls is not None else None
+    if config.access.allow_anonymous and not is_loopback(serve_on):
+        robot.access_mode = "anonymous"
+        logging.getLogger("ramp.access").warning(
+            "MCP on %s with NO authentication (access.allow_anonymous: true): anyone who "
+            "can reach this address may drive the robot; set up server.tls "
+            "(docs/operating/security.md)", serve_on)
+    server = McpServer(scheduler, robot, host=serve_on,
                        port=port if port is not None else config.server.port,
                        max_clients=config.server.max_clients, max_line=config.server.max_line,
-                       max_output=config.server.max_output)
+                       max_output=config.server.max_output, tls=tls, access=config.access)
     if recorder is not None:
         from ramp.runtime.recording import RecorderObserver
 
@@ -116,6 +130,9 @@ def _connect(sup: Supervisor, observer: Observer) -> None:
                 t, module, state, reason)
     if overridden(observer, "watchdog"):
         sup.watchdog.on_change = lambda state, why, t: observer.watchdog(t, state, why)
+    if overridden(observer, "audit"):
+        sup.robot.on_audit = lambda client, req, outcome, t: observer.audit(
+            t, client, req, outcome)
     if overridden(observer, "interlock"):
         sup.robot.interlocks.on_change = lambda name, active, why, t: observer.interlock(
             t, name, active, why)

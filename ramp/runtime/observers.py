@@ -43,6 +43,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from ramp.layers.robot_distribution import Client
+from ramp.mcp.messages import Request
 from ramp.mcp.protocol import TooLong
 
 if TYPE_CHECKING:
@@ -50,7 +51,7 @@ if TYPE_CHECKING:
 
 #: The methods `build` connects when a subclass overrides them.
 POINTS = ("message_in", "message_out", "command", "module_state", "watchdog", "control",
-          "interlock", "stall", "bus_fault", "tick", "tick_done")
+          "interlock", "audit", "stall", "bus_fault", "tick", "tick_done")
 
 
 class Observer:
@@ -82,6 +83,10 @@ class Observer:
 
     def interlock(self, t: float, name: str, active: bool, why: str) -> None:
         """An interlock rule became active or was released."""
+
+    def audit(self, t: float, client: Client, request: Request, outcome: str) -> None:
+        """A state-changing request, "accepted" or refused (its error code), and who sent
+        it (SPEC 13: `client.identity`, `client.peer`)."""
 
     def stall(self, t: float, gap_s: float, unit: str) -> None:
         """The loop lost `gap_s` in `unit`; every module has been stopped."""
@@ -147,6 +152,9 @@ class FanOut(Observer):
 
     def interlock(self, t: float, name: str, active: bool, why: str) -> None:
         self._call("interlock", t, name, active, why)
+
+    def audit(self, t: float, client: Client, request: Request, outcome: str) -> None:
+        self._call("audit", t, client, request, outcome)
 
     def stall(self, t: float, gap_s: float, unit: str) -> None:
         self._call("stall", t, gap_s, unit)

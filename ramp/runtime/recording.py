@@ -21,8 +21,8 @@ from typing import TYPE_CHECKING
 
 from ramp.config import Config
 from ramp.layers.robot_distribution import Client
-from ramp.mcp.messages import Response
-from ramp.mcp.protocol import TooLong
+from ramp.mcp.messages import Request, Response
+from ramp.mcp.protocol import TooLong, format_request
 from ramp.recorder.config import RecorderConfig
 from ramp.runtime.observers import Observer
 
@@ -120,6 +120,11 @@ class RecorderObserver(Observer):
             self.rec.event(t, "watchdog_trip", f"every module stopped: {why}")
         else:
             self.rec.event(t, "watchdog", f"{state}: {why}")
+
+    def audit(self, t: float, client: Client, request: Request, outcome: str) -> None:
+        """Who asked what, and what came of it (SPEC 13): `IDENTITY PEER OUTCOME REQUEST`."""
+        self.rec.event(t, "audit", f"{client.identity} {client.peer} {outcome} "
+                                   f"{format_request(request)}")
 
     def control(self, t: float, owner: str, peer: str) -> None:
         text = f"released ({peer})" if owner == "none" else f"{owner} ({peer})"

@@ -63,6 +63,12 @@ def test_figures_are_real_measurements_beside_baselines(smoke: dict[str, Any]) -
     for n in smoke["settings"]["tp_clients"]:
         assert rt["pipelined"][f"clients_{n}"]["req_per_s"]["value"] > 0
 
+    tls = smoke["tls"]  # SPEC 13: TLS beside plain on the same server, and a flood
+    assert tls["rtt_us"]["p50"]["value"] > 0 and tls["rtt_us"]["p50"]["baseline"] > 0
+    assert tls["flood"]["attempts"] > 0
+    assert tls["flood"]["operator_connect_to_stop_ms"]["n"] > 0
+    assert tls["flood"]["tick_late_us"]["flood"]["n"] > 0
+
     c2w = smoke["command_to_wire"]
     assert c2w["single"]["missing"] == 0
     assert c2w["single"]["send_to_wire_us"]["p50"]["value"] > 0

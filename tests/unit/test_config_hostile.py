@@ -158,6 +158,8 @@ modules:
 def test_good_names_and_hosts_pass(tmp_path: Path) -> None:
     for host in ("0.0.0.0", "::1", "localhost", "robot-1.local", "fe80::1"):
         text = GOOD.replace("127.0.0.1", f"'{host}'").replace("demo: {", "Base_2: {type: demo, ")
+        # off loopback only with TLS or an explicit opt-out (SPEC 13)
+        text += "\naccess: {allow_anonymous: true}\n"
         f = tmp_path / "ok.yaml"
         f.write_text(text)
         cfg, errors = check_config(f)

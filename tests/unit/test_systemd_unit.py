@@ -6,6 +6,7 @@ import os
 import re
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -144,8 +145,11 @@ def test_systemd_analyze_verify_accepts_the_unit(tmp_path: Path) -> None:
 
 
 def install(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    # PYTHON: the interpreter that makes the certificates under --root (this one: it has
+    # RAMP's dependencies; the target's own venv does it on a live install).
     return subprocess.run(["bash", str(INSTALL), *args], capture_output=True, text=True,
-                          timeout=60, env={**os.environ, **(env or {})})
+                          timeout=60, env={**os.environ, "PYTHON": sys.executable,
+                                           **(env or {})})
 
 
 def test_install_script_parses_and_is_strict() -> None:
@@ -181,7 +185,8 @@ def test_dry_run_on_the_live_system_prints_every_step_and_needs_no_root() -> Non
 def test_dry_run_into_a_root_changes_nothing(tmp_path: Path) -> None:
     proc = install("--dry-run", "--root", str(tmp_path))
     assert proc.returncode == 0, proc.stderr
-    assert f"install -m 0644 {REPO}/ramp.yaml {tmp_path}/etc/ramp/ramp.yaml" in proc.stdout
+    assert f"grep -v '^server:' {REPO}/ramp.yaml > {tmp_path}/etc/ramp/ramp.yaml" in proc.stdout
+    assert f"certs init {tmp_path}/etc/ramp/certs --host 127.0.0.1" in proc.stdout
     assert f"write {tmp_path}/etc/udev/rules.d/60-ramp-phidgets.rules" in proc.stdout
     assert "systemctl enable" not in proc.stdout.replace(
         "skipped with --root: systemctl daemon-reload, enable --now", "")
@@ -200,8 +205,13 @@ def test_install_into_a_root_is_idempotent_and_keeps_the_config(tmp_path: Path) 
     rule = (tmp_path / "etc" / "udev" / "rules.d" / "60-ramp-phidgets.rules").read_text()
     assert 'SUBSYSTEM=="usb", ATTRS{idVendor}=="06c2", MODE="0660", GROUP="plugdev"' in rule
     config = tmp_path / "etc" / "ramp" / "ramp.yaml"
-    assert config.read_text() == ((REPO / "ramp.yaml").read_text() + "\n"
+    wiring = "".join(line for line in (REPO / "ramp.yaml").read_text().splitlines(True)
+                     if not line.startswith("server:"))
+    assert config.read_text() == (wiring + "\n"
                                   + (REPO / "scripts" / "ramp-service.yaml").read_text())
+    certs = tmp_path / "etc" / "ramp" / "certs"
+    assert {p.name for p in certs.iterdir()} == {"ca.crt", "ca.key", "robot.crt", "robot.key"}
+    assert (certs / "robot.key").stat().st_mode & 0o077 == 0
     config.write_text("# edited on the robot\n")
     second = install("--root", str(tmp_path))
     assert second.returncode == 0, second.stderr
@@ -223,6 +233,9 @@ def test_the_installed_config_records_into_the_units_state_directory(
     assert Path(config.recorder.dir).is_relative_to(state)
     assert config.recorder.max_mb * config.recorder.keep <= 4000  # a few GB of an SD card
     assert set(config.modules) == {"base", "ble"}  # the robot's wiring, unchanged
+    # the secure set-up (SPEC 13): every interface, mutual TLS, roles; loopback operators
+    assert config.server.host == "0.0.0.0" and config.server.tls is not None
+    assert config.access.configured and config.access.local == "operator"
     dry = install("--dry-run", "--root", str(tmp_path / "dry"))
     assert f"cat {REPO}/scripts/ramp-service.yaml >> {tmp_path}/dry/etc/ramp/ramp.yaml" \
         in dry.stdout

@@ -16,8 +16,15 @@ class Client:
     watchdog keeps of it: when its last complete message arrived, and its own timeout (SPEC
     2.2: `robot:watchdog.timeout=(s)` sets the sender's, for as long as it is connected)."""
 
-    def __init__(self, peer: str) -> None:
+    def __init__(self, peer: str, identity: str = "local", role: str = "admin",
+                 tls: bool = False) -> None:
         self.peer = peer
+        #: Who it is (SPEC 13): its certificate's CN over TLS, else `local`.
+        self.identity = identity
+        #: What it may do: observer, operator or admin (`ramp.config.access.ROLES`).
+        self.role = role
+        #: It proved its identity with a client certificate (mutual TLS).
+        self.tls = tls
         #: Clock time of its last complete message (any: a heartbeat, an erroneous one).
         self.last_heard = -math.inf
         #: Its own watchdog timeout (s); None: the configured default.

@@ -28,6 +28,7 @@ from typing import Any, Protocol
 from ramp.errors import RequestError
 from ramp.layers.module_distribution import Function, Module
 from ramp.layers.module_distribution.router import Version, answer
+from ramp.layers.robot_distribution.access import forbidden
 from ramp.layers.robot_distribution.context import Client, RequestContext
 from ramp.layers.robot_distribution.control import Control
 from ramp.layers.robot_distribution.interlocks import Interlocks
@@ -41,6 +42,9 @@ log = logging.getLogger("ramp.robot")
 
 #: Observer hook: (owner name or "none", the client's peer, clock time) when control changes.
 ControlHook = Callable[[str, str, float], None]
+#: Observer hook (SPEC 13, audit): (client, request, "accepted" or the refusal's code, clock
+#: time) for every state-changing request, accepted or refused.
+AuditHook = Callable[[Client, Request, str, float], None]
 
 
 @dataclass(frozen=True)
@@ -103,7 +107,7 @@ class RobotRequests(Module):
                    ("watchdog", "timeout", "float", "s"), ("watchdog", "state", "name", ""),
                    ("watchdog", "commanders", "int", ""),
                    ("control", "owner", "name", ""), ("clients", "count", "int", ""),
-                   ("interlock", "active", "name", ""))
+                   ("interlock", "active", "name", ""), ("access", "me", "name", ""))
 
     def describe(self) -> list[Response]:
         out = [Response("robot", "robot", "module", (name,)) for name in self.layer.slots]
@@ -120,6 +124,8 @@ class RobotRequests(Module):
                                 (prop, kind, unit) if unit else (prop, kind)))
         out.extend(Response("robot", name, "property", ("state", "name"))
                    for name in self.layer.slots)
+        if self.layer.access_mode is not None:
+            out.append(Response("robot", "access", "property", ("mode", "name")))
         if self.layer.recording():
             out.append(Response("robot", "recorder", "property", ("dropped", "int")))
         out.extend(Response("robot", fn.device, "kind", (fn.name, fn.kind))
@@ -160,6 +166,11 @@ class RobotDistribution:
         self.extra: dict[str, Module] = {}
         #: Observer hook (the flight recorder): None costs nothing.
         self.on_control: ControlHook | None = None
+        #: `robot:access.mode` (SPEC 13): "anonymous" when MCP is open to the network with
+        #: no authentication (`access.allow_anonymous`), else None (no row).
+        self.access_mode: str | None = None
+        #: Observer hook (the flight recorder's audit): None costs nothing.
+        self.on_audit: AuditHook | None = None
 
     @property
     def version(self) -> Version:
@@ -199,17 +210,30 @@ class RobotDistribution:
             if line is not None:
                 return line((self._ticks.ticks, self.changes))
             return answer(fn.run(ctx, *values) if fn.takes_context else fn.run(*values))
+        audit = self.on_audit
+        if ctx.client.role != "admin":  # SPEC 13: what the sender's role permits
+            refusal = forbidden(ctx.client.role, kind, module in self.extra)
+            if refusal is not None:
+                if audit is not None:
+                    audit(ctx.client, req, "forbidden", ctx.now)
+                return _error(req, "forbidden", refusal)
         if (kind == "motion" or kind == "state") and not self.control.may_command(ctx.client):
+            if audit is not None:
+                audit(ctx.client, req, "not_owner", ctx.now)
             return _error(req, "not_owner", f"control is held by {self.control.owner_name}")
         interlocks = self.interlocks
         if kind == "motion" and interlocks.guards:
             refusal = interlocks.permit(module, fn, values, ctx.now)
             if refusal is not None:
+                if audit is not None:
+                    audit(ctx.client, req, "interlocked", ctx.now)
                 return _error(req, "interlocked", refusal)
         self.changes += 1
         try:
             result = fn.run(ctx, *values) if fn.takes_context else fn.run(*values)
         except RequestError as exc:
+            if audit is not None:
+                audit(ctx.client, req, exc.code, ctx.now)
             return _error(req, exc.code, exc.detail)
         except Exception as exc:
             log.exception("request %s:%s.%s failed", req.module, req.device, req.function)
@@ -223,6 +247,8 @@ class RobotDistribution:
             self.watchdog.command(module, ctx.client, ctx.now, self.any_moving())
         elif kind == "stop" and not self.any_moving():
             self.watchdog.disarm(ctx.now)
+        if audit is not None:
+            audit(ctx.client, req, "accepted", ctx.now)
         return answer(result) if result else b""
 
     def _unusable(self, req: Request, slot: ModuleSlot | None) -> bytes:
@@ -254,6 +280,9 @@ class RobotDistribution:
 
     def acquire(self, ctx: RequestContext, name: str) -> None:
         client = ctx.client
+        if client.tls and name != client.identity:  # SPEC 13: nobody poses as another
+            raise RequestError("forbidden", f"you are {client.identity}: acquire as "
+                               f"{client.identity}, not {name}")
         previous = self.control.owner_name
         if self.control.acquire(client, name):
             self.stop_all(f"control acquired by {name}", ctx.now)
@@ -393,6 +422,10 @@ class RobotDistribution:
         rows.append(Response("robot", "interlock", "active", active or ("none",)))
         rows.extend(Response("robot", name, "state", (slot.state,))
                     for name, slot in self.slots.items())
+        if client is not None:
+            rows.append(Response("robot", "access", "me", (client.identity, client.role)))
+        if self.access_mode is not None:
+            rows.append(Response("robot", "access", "mode", (self.access_mode,)))
         if h.recorder_dropped is not None:
             rows.append(Response("robot", "recorder", "dropped", (h.recorder_dropped,)))
         return rows

@@ -20,12 +20,23 @@ import contextlib
 import errno
 import functools
 import logging
+import math
 import socket
+import ssl
 from collections import deque
 from collections.abc import Callable
 
+from ramp.common.access import RANK, AccessConfig, is_loopback
 from ramp.common.hostport import format_hostport
 from ramp.layers.robot_distribution import Client, RequestContext, RobotDistribution
+from ramp.layers.server.gate import (
+    HANDSHAKE_S,
+    MAX_PENDING,
+    TLS_HANDSHAKE_RECORD,
+    Pending,
+    certificate_identity,
+    choose_victim,
+)
 from ramp.mcp.messages import Request, error_response
 from ramp.mcp.protocol import (
     LineSplitter,
@@ -66,8 +77,14 @@ PARSE_CACHE_SIZE = 512
 class Connection(Client):
     """One TCP client: its socket, input splitter, the message being answered, output."""
 
-    def __init__(self, sock: socket.socket, peer: str, max_line: int, now: float) -> None:
-        super().__init__(peer)
+    def __init__(self, sock: socket.socket, peer: str, max_line: int, now: float,
+                 address: str = "", identity: str = "local", role: str = "admin",
+                 tls: bool = False, serial: int | None = None) -> None:
+        super().__init__(peer, identity, role, tls)
+        #: The remote address without its port (per-address caps, SPEC 13).
+        self.address = address
+        #: Its certificate's serial (revocation on SIGHUP), None for a plain client.
+        self.serial = serial
         #: When its last complete message arrived (or when it connected).
         self.last_message_at = now
         self.sock = sock
@@ -102,7 +119,9 @@ class McpServer:
 
     def __init__(self, scheduler: Scheduler, robot: RobotDistribution,
                  host: str = "127.0.0.1", port: int = 5577, max_clients: int = 8,
-                 max_line: int = 4096, max_output: int = 1 << 20) -> None:
+                 max_line: int = 4096, max_output: int = 1 << 20,
+                 tls: ssl.SSLContext | None = None,
+                 access: AccessConfig | None = None) -> None:
         self.scheduler = scheduler
         self.robot = robot
         self.host = host
@@ -130,6 +149,14 @@ class McpServer:
         #: Parsed short messages by their bytes: parsing is a pure function of them, and a
         #: client repeats the same few lines (a poll, a heartbeat) thousands of times.
         self._parsed: dict[bytes, tuple[tuple[Request, ...], bytes]] = {}
+        #: Mutual TLS (SPEC 13): the robot's context, None for plain TCP only.
+        self.tls = tls
+        self.access = access if access is not None else AccessConfig()
+        #: Connections not yet admitted (first byte unread, or a TLS handshake), by fd.
+        self.pending: dict[int, Pending] = {}
+        self._pending_task: ScheduledTask | None = None
+        self.handshakes_failed = 0
+        self._handshake_failures_logged = 0
 
     @property
     def address(self) -> tuple[str, int]:
@@ -165,6 +192,8 @@ class McpServer:
         return self._accept_paused_until is not None
 
     def close(self) -> None:
+        for p in list(self.pending.values()):
+            self._close_pending(p, "server shutting down")
         for conn in list(self.clients.values()):
             self._drop(conn, "server shutting down")
         if self.sock is not None:
@@ -184,41 +213,273 @@ class McpServer:
                 self._accept_failed(exc)
                 return
             peer = format_hostport(addr[0], addr[1])  # [::1]:41234, as clients take it
-            if len(self.clients) >= self.max_clients and not self._evict_for(peer):
-                self.refused += 1
-                log.warning("refused %s: already %d clients (server.max_clients), none silent "
-                            "for %.0f s that is neither owner nor commanding a moving module", peer,
-                            len(self.clients), EVICT_SILENCE_S)
-                _say_and_close(sock, b"robot:mcp.error=(busy,too many clients; at most "
-                               + str(self.max_clients).encode() + b")\n")
+            address = str(addr[0])
+            loopback = is_loopback(address)
+            if self.tls is not None:
+                self._start_pending(sock, address, peer, loopback)
                 continue
-            sock.setblocking(False)
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            conn = Connection(sock, peer, self.max_line, self.scheduler.clock.now())
-            self.clients[conn.fd] = conn
-            self.accepted += 1
-            self.scheduler.add_reader(conn.fd, functools.partial(self._readable, conn))
-            log.info("client %s connected (%d of %d)", peer, len(self.clients),
-                     self.max_clients)
+            role = self._plain_role(loopback)
+            if role is None:
+                _say_and_close(sock, b"robot:mcp.error=(forbidden,plain MCP is not accepted "
+                               b"here: connect with mcps:// and a client certificate)\n")
+                continue
+            self._admit(sock, peer, address, "local", role, False, None)
 
-    def _evict_for(self, newcomer: str) -> bool:
-        """Make room for a newcomer: close the client silent longest, if it has sent no
-        complete message for EVICT_SILENCE_S and is neither the owner nor a commander of a
-        moving module."""
+    def _plain_role(self, loopback: bool) -> str | None:
+        """The role of a client that speaks plain MCP (SPEC 13), or None: refused."""
+        access = self.access
+        if not access.configured or access.allow_anonymous:
+            return "admin" if loopback or access.allow_anonymous else None
+        if not loopback or access.local == "none":
+            return None
+        return access.local
+
+    def _admit(self, sock: socket.socket, peer: str, address: str, identity: str, role: str,
+               tls: bool, serial: int | None) -> None:
+        """A connection that is what it says: give it a slot (making room if its role may),
+        or tell it `busy` and close it."""
         now = self.scheduler.clock.now()
-        silent = [c for c in self.clients.values()
-                  if now - c.last_message_at >= EVICT_SILENCE_S and not self.robot.protects(c)]
-        if not silent:
+        if not self._make_room(peer, address, identity, role, tls, now):
+            self.refused += 1
+            _say_and_close(sock, b"robot:mcp.error=(busy,too many clients; at most "
+                           + str(self.max_clients).encode() + b")\n")
+            return
+        sock.setblocking(False)
+        with contextlib.suppress(OSError):
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        conn = Connection(sock, peer, self.max_line, now, address, identity, role, tls,
+                          serial)
+        self.clients[conn.fd] = conn
+        self.accepted += 1
+        self.scheduler.add_reader(conn.fd, functools.partial(self._readable, conn))
+        who = f" as {identity} ({role})" if tls or self.access.configured else ""
+        log.info("client %s connected%s (%d of %d)", peer, who, len(self.clients),
+                 self.max_clients)
+
+    def _make_room(self, peer: str, address: str, identity: str, role: str, tls: bool,
+                   now: float) -> bool:
+        """SPEC 13's caps: per identity (a newcomer replaces its own identity's longest-silent
+        connection: a laptop that lost Wi-Fi reconnects), per remote address and in all (an
+        operator or admin evicts an observer or unauthenticated connection; others get
+        `busy`)."""
+        access = self.access
+        if tls:
+            same = [c for c in self.clients.values() if c.tls and c.identity == identity]
+            if len(same) >= access.max_per_identity:
+                self._evict(min(same, key=_silence_key), peer, now,
+                            f"access.max_per_identity {access.max_per_identity}")
+            here = [c for c in self.clients.values() if c.tls and c.address == address]
+            if len(here) >= access.max_per_address:
+                victim = choose_victim(role, here, _silence_key, self.robot.protects, now,
+                                       EVICT_SILENCE_S, authenticated=True)
+                if victim is None and RANK.get(role, 0) < RANK["operator"]:
+                    log.warning("refused %s as %s: its address holds %d connections "
+                                "(access.max_per_address)", peer, identity, len(here))
+                    return False
+                if victim is not None:
+                    self._evict(victim, peer, now,
+                                f"access.max_per_address {access.max_per_address}")
+        if len(self.clients) < self.max_clients:
+            return True
+        victim = choose_victim(role, self.clients.values(), _silence_key, self.robot.protects,
+                               now, EVICT_SILENCE_S, roles=access.configured,
+                               authenticated=tls)
+        if victim is None:
+            log.warning("refused %s: already %d clients (server.max_clients), none silent "
+                        "for %.0f s that is neither owner nor commanding a moving module", peer,
+                        len(self.clients), EVICT_SILENCE_S)
             return False
-        victim = min(silent, key=lambda c: c.last_message_at)
+        self._evict(victim, peer, now, f"server.max_clients {self.max_clients}")
+        return True
+
+    def _evict(self, victim: Client, newcomer: str, now: float, cap: str) -> None:
+        assert isinstance(victim, Connection)
         quiet = now - victim.last_message_at
-        log.warning("client %s evicted: no message for %.1f s and %s needed its slot "
-                    "(server.max_clients %d)", victim.peer, quiet, newcomer, self.max_clients)
+        log.warning("client %s evicted: no message for %.1f s and %s needed its slot (%s)",
+                    victim.peer, quiet, newcomer, cap)
         self.evicted += 1
         self._drop(victim, f"evicted after {quiet:.1f} s of silence",
                    farewell=b"robot:mcp.error=(busy,closed to make room for another client: "
                    + f"no message for {quiet:.0f} s".encode() + b")\n")
-        return True
+
+    def reload_access(self, access: AccessConfig, tls: ssl.SSLContext | None) -> list[str]:
+        """New identities, roles, revocations and caps (SIGHUP, SPEC 13): every connected
+        client keeps its connection with its new role, except one whose certificate is now
+        revoked or whose identity is gone, which is dropped at once (losing a commander
+        trips the watchdog). Returns the peers dropped."""
+        self.access = access
+        if tls is not None:
+            self.tls = tls
+        dropped = []
+        for conn in list(self.clients.values()):
+            if conn.tls:
+                role = access.role_of(conn.identity)
+                why = ("its certificate is revoked" if conn.serial in access.revoked else
+                       "its identity left access.identities" if role is None else "")
+            else:
+                role = self._plain_role(is_loopback(conn.address))
+                why = "plain clients are no longer accepted" if role is None else ""
+            if why:
+                dropped.append(conn.peer)
+                log.warning("client %s (%s) dropped: %s", conn.peer, conn.identity, why)
+                self._drop(conn, why, farewell=b"robot:mcp.error=(forbidden,"
+                           + why.encode() + b")\n")
+            elif role is not None and role != conn.role:
+                log.info("client %s (%s) is now %s", conn.peer, conn.identity, role)
+                conn.role = role
+        return dropped
+
+    # -- the gate: first byte, TLS handshake (SPEC 13) ----------------------------------------
+    def _start_pending(self, sock: socket.socket, address: str, peer: str,
+                       loopback: bool) -> None:
+        """Hold a new connection on a TLS port until it proves who it is. It holds no slot;
+        too many in progress (in all, or from its address) replace the oldest."""
+        now = self.scheduler.clock.now()
+        # A silent loopback connection that may speak plain MCP is a local client yet to
+        # talk (`nc`, a shell waiting for its user): it waits without a deadline, bounded
+        # only by MAX_PENDING. Everything else must finish a handshake in HANDSHAKE_S.
+        patient = loopback and self._plain_role(True) is not None
+        mine = [p for p in self.pending.values() if p.address == address and not p.patient]
+        if mine and len(mine) + sum(1 for c in self.clients.values() if c.tls and
+                                    c.address == address) >= self.access.max_per_address:
+            self._close_pending(min(mine, key=lambda p: p.started), "replaced by a newer "
+                                "handshake from its address (access.max_per_address)")
+        if len(self.pending) >= MAX_PENDING:
+            self._close_pending(min(self.pending.values(), key=lambda p: p.started),
+                                f"replaced by a newer handshake ({MAX_PENDING} in progress)")
+        sock.setblocking(False)
+        p = Pending(sock, sock.fileno(), address, peer, loopback, now,
+                    math.inf if patient else now + HANDSHAKE_S, patient=patient)
+        self.pending[p.fd] = p
+        self.scheduler.add_reader(p.fd, functools.partial(self._pending_step, p))
+        if self._pending_task is None:
+            self._pending_task = self.scheduler.add_task(
+                "server.handshakes", min(10.0, self.scheduler.rate_hz), self._expire_pending)
+
+    def _pending_step(self, p: Pending) -> None:
+        """Readiness of a pending connection: read its first byte, then drive the handshake."""
+        if p.closed:
+            return
+        if p.tls is None:
+            sock = p.sock
+            assert isinstance(sock, socket.socket)
+            try:
+                first = sock.recv(1, socket.MSG_PEEK)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as exc:
+                self._close_pending(p, f"read error: {exc.strerror or exc}")
+                return
+            if not first:
+                self._close_pending(p, "closed before its handshake")
+                return
+            if first[0] != TLS_HANDSHAKE_RECORD:
+                self._plain_on_tls_port(p)
+                return
+            assert self.tls is not None
+            if p.patient:  # it speaks TLS after all: now it has a handshake's time
+                p.patient = False
+                p.deadline = self.scheduler.clock.now() + HANDSHAKE_S
+            try:
+                p.tls = self.tls.wrap_socket(sock, server_side=True,
+                                             do_handshake_on_connect=False)
+            except (ssl.SSLError, OSError) as exc:
+                self._close_pending(p, f"TLS failed: {exc}")
+                return
+            p.sock = p.tls
+        self._handshake(p)
+
+    def _handshake(self, p: Pending) -> None:
+        tls = p.tls
+        assert tls is not None
+        try:
+            tls.do_handshake()
+        except ssl.SSLWantReadError:
+            self._pending_wants_write(p, False)
+            return
+        except ssl.SSLWantWriteError:
+            self._pending_wants_write(p, True)
+            return
+        except (ssl.SSLError, OSError, ValueError) as exc:
+            self._handshake_failed(p, exc)
+            return
+        identity, serial = certificate_identity(tls)
+        access = self.access
+        why = ""
+        role = access.role_of(identity)
+        if serial is not None and serial in access.revoked:
+            why = f"certificate {serial:#x} of {identity} is revoked (access.revoked)"
+        elif role is None:
+            why = f"{identity or 'a certificate without a CN'} is not in access.identities"
+        self._forget_pending(p)
+        if why:
+            self.handshakes_failed += 1
+            log.warning("refused %s: %s", p.peer, why)
+            _say_and_close(tls, b"robot:mcp.error=(forbidden,"
+                           + why.replace(",", ";").replace(")", "]").encode("ascii", "replace")
+                           + b")\n")
+            return
+        assert role is not None
+        self._admit(tls, p.peer, p.address, identity, role, True, serial)
+
+    def _plain_on_tls_port(self, p: Pending) -> None:
+        """Plain MCP on the TLS port: loopback may (SPEC 13, role `access.local`); anyone
+        else is told to use TLS, and never reaches the parser."""
+        role = self._plain_role(p.loopback)
+        sock = p.sock
+        assert isinstance(sock, socket.socket)
+        self._forget_pending(p)
+        if role is None:
+            log.warning("refused %s: plain MCP on the TLS port", p.peer)
+            _say_and_close(sock, b"robot:mcp.error=(forbidden,this port speaks TLS: connect "
+                           b"with mcps:// and a client certificate)\n")
+            return
+        self._admit(sock, p.peer, p.address, "local", role, False, None)
+
+    def _pending_wants_write(self, p: Pending, write: bool) -> None:
+        if write and not p.writing:
+            p.writing = True
+            self.scheduler.add_writer(p.fd, functools.partial(self._pending_step, p))
+        elif not write and p.writing:
+            p.writing = False
+            self.scheduler.remove_writer(p.fd)
+
+    def _handshake_failed(self, p: Pending, exc: Exception) -> None:
+        self.handshakes_failed += 1
+        reason = getattr(exc, "reason", None) or type(exc).__name__
+        # A flood of bad handshakes is one line now and then, not one per connection.
+        if self.handshakes_failed - self._handshake_failures_logged >= 100 or \
+                self._handshake_failures_logged == 0:
+            log.warning("TLS handshake from %s failed: %s (%d failed so far)", p.peer,
+                        reason, self.handshakes_failed)
+            self._handshake_failures_logged = self.handshakes_failed
+        self._close_pending(p, f"handshake failed: {reason}")
+
+    def _expire_pending(self, now: float, dt: float) -> None:
+        """Scheduler task while handshakes are in progress: each has HANDSHAKE_S."""
+        for p in [p for p in self.pending.values() if now >= p.deadline]:
+            self.handshakes_failed += 1
+            self._close_pending(p, f"no handshake within {HANDSHAKE_S:g} s")
+        if not self.pending and self._pending_task is not None:
+            self.scheduler.remove_task(self._pending_task)
+            self._pending_task = None
+
+    def _forget_pending(self, p: Pending) -> None:
+        """Out of the pending set (admitted, refused or closed); its fd's callbacks go."""
+        self.pending.pop(p.fd, None)
+        self.scheduler.remove_reader(p.fd)
+        if p.writing:
+            p.writing = False
+            self.scheduler.remove_writer(p.fd)
+
+    def _close_pending(self, p: Pending, why: str) -> None:
+        if p.closed:
+            return
+        p.closed = True
+        self._forget_pending(p)
+        with contextlib.suppress(OSError):
+            p.sock.close()  # type: ignore[attr-defined]
+        log.debug("connection %s closed before admission: %s", p.peer, why)
 
     def _accept_failed(self, exc: OSError) -> None:
         self.accept_failures += 1
@@ -247,7 +508,8 @@ class McpServer:
         if conn.ctx is None and not conn.queue:
             try:
                 data = conn.sock.recv(READ_CHUNK)
-            except (BlockingIOError, InterruptedError):
+            except (BlockingIOError, InterruptedError, ssl.SSLWantReadError,
+                    ssl.SSLWantWriteError):
                 return
             except OSError as exc:
                 self._drop(conn, f"read error: {exc.strerror or exc}")
@@ -263,6 +525,8 @@ class McpServer:
         if conn.closed:
             return
         more = conn.ctx is not None or bool(conn.queue)
+        if conn.tls and not more:  # decrypted bytes TLS holds that select cannot see
+            more = conn.sock.pending() > 0  # type: ignore[attr-defined]
         if more or conn.fd in self._pending_fds:
             self.scheduler.set_pending(conn.fd, more)
         self._flush(conn)
@@ -390,7 +654,8 @@ class McpServer:
         if out and not conn.writing and not conn.input_ended:  # the usual case: it all goes
             try:
                 n = conn.sock.send(out)
-            except (BlockingIOError, InterruptedError):
+            except (BlockingIOError, InterruptedError, ssl.SSLWantReadError,
+                    ssl.SSLWantWriteError):
                 n = 0
             except OSError as exc:
                 self._drop(conn, f"write error: {exc.strerror or exc}")
@@ -402,7 +667,8 @@ class McpServer:
         while out:
             try:
                 n = conn.sock.send(out)
-            except (BlockingIOError, InterruptedError):
+            except (BlockingIOError, InterruptedError, ssl.SSLWantReadError,
+                    ssl.SSLWantWriteError):
                 break
             except OSError as exc:
                 self._drop(conn, f"write error: {exc.strerror or exc}")
@@ -444,6 +710,11 @@ class McpServer:
         if not conn.lost_reported:
             conn.lost_reported = True
             self.robot.client_lost(conn, self._now())
+
+
+def _silence_key(client: Client) -> float:
+    """Longest silent first (every server client is a Connection)."""
+    return client.last_message_at if isinstance(client, Connection) else 0.0
 
 
 def _say_and_close(sock: socket.socket, line: bytes) -> None:
