@@ -64,6 +64,7 @@ from ramp.layers.functional import (
     mix,
 )
 from ramp.layers.functional.base_drive import round_half_away
+from ramp.layers.functional.battery import Charge
 from ramp.layers.module_distribution import (
     KINDS as FUNCTION_KINDS,
 )
@@ -127,4 +128,5 @@ __all__ = [
     "FlagParam", "FloatParam", "Function", "IntParam", "Kind", "Module", "Motor",
     "MotorChannel", "Param", "Property", "Response", "Rule", "ServoChannel", "ServoWorld",
     "SimWorld", "SystemVoltage", "Task", "Value", "Voltage", "mix", "round_half_away",
+    "Charge",
 ]
