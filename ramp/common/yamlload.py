@@ -201,7 +201,7 @@ class _Loader(yaml.SafeLoader):
                         for k, v in node.value)
         if size > MAX_NODES:
             raise yaml.composer.ComposerError(
-                None, None, f"expands to more than {MAX_NODES:,} values once its aliases are "
+                None, None, f"expands to more than {MAX_NODES} values once its aliases are "
                 "counted (an alias bomb?)" if self._aliased else _too_many(),
                 node.start_mark)
         self._sizes[id(node)] = size
@@ -289,7 +289,7 @@ def construct(node: yaml.Node) -> Any:
 
 
 def _too_many() -> str:
-    return (f"holds more than {MAX_NODES:,} values (the limit on any YAML file RAMP reads; "
+    return (f"holds more than {MAX_NODES} values (the limit on any YAML file RAMP reads; "
             "a config or a world file holds a few hundred)")
 
 
@@ -311,7 +311,8 @@ def _count_values(text: str) -> None:
             if isinstance(event, values):
                 n += 1
                 if n > MAX_NODES:
-                    raise YamlError(_too_many(), event.start_mark.line + 1)
+                    mark = event.start_mark
+                    raise YamlError(_too_many(), mark.line + 1 if mark is not None else 0)
     except yaml.YAMLError:
         return
     finally:

@@ -95,7 +95,7 @@ EXPECTED = {
     "too large": ": larger than 1024 KiB; ",
     "a NUL byte": ":2: not valid YAML: character #x0000 is not allowed in YAML",
     "Latin-1": ":2: not UTF-8: byte 0xe9 at column 6",
-    "an alias bomb": "not valid YAML: expands to more than 50,000 values",
+    "an alias bomb": "not valid YAML: expands to more than 50000 values",
     "nested 1,000 deep": ":1: not valid YAML: nested deeper than 32 levels",
 }
 
@@ -217,7 +217,7 @@ def test_a_huge_file_without_aliases_says_which_limit_it_hit_and_says_it_quickly
         load_world(path)
     elapsed = time.perf_counter() - t0
     text = str(info.value)
-    assert "alias bomb" not in text and "more than 50,000 values" in text, text
+    assert "alias bomb" not in text and "more than 50000 values" in text, text
     assert f"{path}:" in text and "limit" in text
     assert elapsed < 1.5, elapsed  # 0.1 s here; was 5-7 s (noisy: the machine is shared)
     # A world of a thousand rocks is well inside the limit.
