@@ -239,6 +239,17 @@ def test_the_site_builds_strictly(tmp_path: Path) -> None:
         assert html.is_file(), f"{name(page)} was not built"
     api = (site / "extending" / "api" / "index.html").read_text(encoding="utf-8")
     assert "McpClient" in api and "parse_response_line" in api, "the API reference is empty"
+    # Offline: the diagrams' script is served with the site (with its licence), so the
+    # theme never fetches it from a CDN (issue 35); no page loads a script from the network.
+    vendored = site / "assets" / "vendor" / "mermaid"
+    assert (vendored / "mermaid.min.js").stat().st_size > 1_000_000
+    assert "MIT License" in (vendored / "LICENSE").read_text(encoding="utf-8")
+    machine = (site / "autonomy" / "state-machine" / "index.html").read_text(encoding="utf-8")
+    assert 'class="mermaid"' in machine
+    assert re.search(r'<script src="[./]*assets/vendor/mermaid/mermaid\.min\.js"', machine)
+    for html in site.rglob("*.html"):
+        text = html.read_text(encoding="utf-8")
+        assert not re.search(r'<script[^>]+src="(?:https?:)?//', text), html
 
 
 def test_the_api_page_documents_a_module_once_it_is_in_the_tree(tmp_path: Path) -> None:
