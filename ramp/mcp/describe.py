@@ -21,7 +21,8 @@ from ramp.mcp.protocol import format_value
 
 #: Functions that only read, by name: the guess for a robot that does not publish kinds.
 READ_FUNCTIONS = frozenset({"get", "describe", "modules"})
-#: The kinds a robot publishes (SPEC 2.2 `describe`; see the README).
+#: The kinds a robot publishes (SPEC 2.2 `describe`; docs/operating/mcp.md, "What a function
+#: does").
 KINDS = ("motion", "stop", "state", "read", "control")
 
 

@@ -264,3 +264,15 @@ def test_the_api_page_documents_a_module_once_it_is_in_the_tree(tmp_path: Path) 
     assert "::: ramp.api\n" in hook.api_markdown(page, tmp_path)
     # The real page carries the marker, so the reference appears when ramp/api.py lands.
     assert "<!-- api: ramp.api -->" in (DOCS / "extending" / "api.md").read_text()
+
+
+def test_code_points_at_the_docs_page_holding_a_text_not_at_the_readme() -> None:
+    """Issue 35: comments said "see the README" for text that had moved to docs/ pages."""
+    stale = [f"{path.relative_to(REPO)}:{n}" for top in ("ramp", "firmware_like", "bench")
+             for path in sorted((REPO / top).rglob("*.py"))
+             for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+             if "README" in line]
+    assert stale == [], stale
+    for page in ("docs/autonomy/state-machine.md", "docs/operating/mcp.md",
+                 "docs/operating/configuration.md"):
+        assert (REPO / page).is_file(), page
