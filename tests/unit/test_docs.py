@@ -276,3 +276,13 @@ def test_code_points_at_the_docs_page_holding_a_text_not_at_the_readme() -> None
     for page in ("docs/autonomy/state-machine.md", "docs/operating/mcp.md",
                  "docs/operating/configuration.md"):
         assert (REPO / page).is_file(), page
+
+
+def test_the_readme_s_simulated_robots_listen_on_loopback_only() -> None:
+    """Issue 35: the README's Scout command served on every interface (scout.yaml's server
+    host is the real rover's 0.0.0.0): a simulated robot a reader starts is theirs alone."""
+    runs = [line for line in (REPO / "README.md").read_text(encoding="utf-8").splitlines()
+            if re.match(r"\s*(\.venv/bin/)?ramp run ", line)]
+    assert runs, "the README shows no ramp run command"
+    for line in runs:
+        assert "--host 127.0.0.1" in line, line
