@@ -530,7 +530,6 @@
   function refreshBanner() {
     const b = $("banner");
     let text = "", cls = "";
-    const s = st.status;
     if (!st.connected) { text = "CONSOLE DISCONNECTED: ramp-teleop is not reachable. The robot stops by itself (watchdog)."; cls = "bad"; }
     // The robot's link, faults and watchdog are alerts (one place, with what to do); the
     // banner is only for what no alert can say: the console itself is gone.
