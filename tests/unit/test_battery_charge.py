@@ -46,7 +46,7 @@ def _yaml_with(tmp_path: Path, battery: str) -> Path:
 @pytest.mark.parametrize(("battery", "key", "words"), [
     ("{bus: sbc_io, channel: 0, cells: 5, chemistry: lipon}", "battery.chemistry",
      "one of lipo"),
-    ("{bus: sbc_io, channel: 0, cells: 0}", "battery.cells", "number of cells"),
+    ("{bus: sbc_io, channel: 0, cells: 49}", "battery.cells", "number of cells"),
     ("{bus: sbc_io, channel: 0, curve: [[20, 50], [19, 60]]}", "battery.curve",
      "volts rising"),
     ("{bus: sbc_io, channel: 0, curve: [[17, 0], [21, 120]]}", "battery.curve",
@@ -70,3 +70,13 @@ def test_marte_and_scout_ship_their_models() -> None:
         assert not errors and config is not None
         battery = config.modules["base"].devices["battery"].params
         assert battery.get("cells") and battery.get("chemistry") == "lipo", name
+
+
+def test_a_battery_with_no_model_still_checks_and_builds(tmp_path: Path) -> None:
+    """The loader fills the model's defaults in (`cells: 0`, not given) and the module checks
+    them again when built (tests/hil_sim/test_driver_bugs.py builds one with no model)."""
+    path = _yaml_with(tmp_path, "{bus: sbc_io, channel: 0}")
+    config, errors = check_config(path)
+    assert not errors and config is not None
+    params = config.modules["base"].devices["battery"].params
+    assert 70.0 < Charge(lambda: 20.0, params).read() < 85.0  # 5 cells guessed: 4.0 V each

@@ -53,7 +53,7 @@ def _curve_ok(values: Mapping[str, Any]) -> bool:
 
 #: The model's keys on the battery device (beside the sensor's `offset` and `scale`).
 MODEL_FIELDS = {
-    "cells": Field(int, 0, 1, 48, what="the number of cells in series"),
+    "cells": Field(int, 0, 0, 48, what="the number of cells in series (0: not given)"),
     "chemistry": Field(str, "lipo", choices=CHEMISTRIES),
     "curve": Field(list, [], what="a list of [volts, percent] rows"),
 }
