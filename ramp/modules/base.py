@@ -97,8 +97,9 @@ class BaseModule(Module):
         for b in ("l_button", "r_button"):
             self.prop(Property(b, "press", "int", _pressed(self.buttons[b])))
         self.prop(Property("battery", "volt", "float", lambda: self.voltage.value, "V"))
-        self.prop(Property("battery", "charge", "float", self.charge.read, "%"))
         self.prop(Property("user_led", "on", "int", lambda: int(self.user_led.is_on)))
+        # Beyond table 5.4 (its rows keep their order): the charge from the battery's model.
+        self.prop(Property("battery", "charge", "float", self.charge.read, "%"))
 
     # -- requests -----------------------------------------------------------------------------
     def _drive(self, speed: int, direction: float) -> None:
