@@ -499,3 +499,27 @@ def test_the_battery_gauge_shows_the_robot_s_own_charge_and_interlocks_are_panel
     # Nothing is wrong with a robot at rest: no alert and no banner.
     sync_api.expect(page.get_by_test_id("alert")).to_have_count(0)
     sync_api.expect(page.locator("#banner")).to_be_hidden()
+
+
+def test_an_active_interlock_is_an_alert_per_rule_an_events_line_and_panel_state(
+        page: Any, mcp: McpClient) -> None:
+    """A robot whose describe gives a rule no severity (`rule=(NAME)`) means `warning`: one
+    alert per rule with the rule's own advice, never "the lift's position" for any rule."""
+    assert mcp.request("sim:input.set=(ble,lift_pot,0.8)") == []
+    try:
+        alert = page.locator('[data-testid="alert"]'
+                             '[data-alert="interlock:chain_needs_ladder_down"]')
+        sync_api.expect(alert).to_be_visible(timeout=5000)
+        sync_api.expect(alert).to_have_attribute("data-severity", "warning")
+        sync_api.expect(alert).not_to_contain_text("lift's position")
+        sync_api.expect(page.get_by_test_id("robot-interlocks")).to_contain_text(
+            "chain_needs_ladder_down (warning)")
+        sync_api.expect(page.get_by_test_id("value:robot:interlock.active")).to_have_attribute(
+            "data-severity", "warning")
+        sync_api.expect(page.get_by_test_id("event").filter(
+            has_text="interlock chain_needs_ladder_down active (warning)")).to_have_count(1)
+    finally:
+        assert mcp.request("sim:input.clear=(ble,lift_pot)") == []
+    sync_api.expect(page.locator('[data-alert^="interlock:"]')).to_have_count(0, timeout=5000)
+    sync_api.expect(page.get_by_test_id("event").filter(
+        has_text="interlock chain_needs_ladder_down released")).to_have_count(1)

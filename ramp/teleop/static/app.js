@@ -405,6 +405,15 @@
       const e = st.values.get(key);
       if (e && e.textContent !== text) e.textContent = text;
     }
+    // The robot panel's active interlocks carry each rule's severity (the text stays the value).
+    const active = st.values.get("robot:interlock.active");
+    if (active) {
+      const names = (active.textContent || "").split(",").filter((n) => n && n !== "none");
+      const sev = (n) => (st.interlocks[n] && st.interlocks[n].severity) || "warning";
+      active.title = names.map((n) => `${n}: ${sev(n)}${st.interlocks[n] && st.interlocks[n].message ? " — " + st.interlocks[n].message : ""}`).join("\n");
+      active.dataset.severity = names.some((n) => sev(n) === "error") ? "error"
+        : names.some((n) => sev(n) === "warning") ? "warning" : names.length ? "info" : "";
+    }
     for (const m of st.modules) {
       if (m.name === "robot") continue;
       const s = (msg.states || {})[m.name] || m.state || "unknown";
