@@ -1,7 +1,7 @@
 """`python -m bench`: run the benchmarks and print one JSON document on stdout.
 
     python -m bench                 full run (several minutes on 2 cores)
-    python -m bench --quick         under a minute
+    python -m bench --quick         under two minutes
     python -m bench --only tick,startup --out bench.json
 
 Progress goes to stderr. A benchmark that fails is reported as {"error": ...} in its section
@@ -49,7 +49,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m bench", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     mode = parser.add_mutually_exclusive_group()
-    mode.add_argument("--quick", action="store_true", help="short runs (under a minute)")
+    mode.add_argument("--quick", action="store_true", help="short runs (under two minutes)")
     mode.add_argument("--smoke", action="store_true",
                       help="minimal settings: proves the code runs (used by the test suite)")
     parser.add_argument("--only", type=parse_only, default=None, metavar="NAME[,NAME]",

@@ -70,8 +70,10 @@ class Settings:
 PROFILES = {
     "full": Settings("full", 60.0, 4, 50.0, 10_000, 500, (1, 4, 8), 16, 3.0,
                      500, 1000.0, 5.0, 10, None, 7, 60.0, 3),
-    "quick": Settings("quick", 5.0, 4, 50.0, 1_000, 100, (1, 4, 8), 16, 1.0,
-                      100, 1000.0, 1.0, 3, None, 3, 5.0, 3),
+    # Quick means under two minutes on a 2-core machine, every section included: one trial
+    # of each figure (the full run keeps three and their median), short idle windows.
+    "quick": Settings("quick", 1.5, 4, 50.0, 1_000, 100, (1, 4, 8), 16, 0.5,
+                      100, 1000.0, 0.5, 1, None, 2, 2.0, 1),
     # Minimal settings for tests/unit/test_bench_smoke.py: proves the code runs, not the figures.
     # The watchdog timeout keeps 10 heartbeat periods of margin: at 0.2 s a loaded machine
     # delayed a heartbeat enough to trip the watchdog (or the relay's) while still driving.

@@ -33,7 +33,7 @@ from typing import Any
 from bench.common import Child, ChildFailed, Settings, compare, progress
 from bench.tick import BaselineLoop
 
-SECONDS = {"full": 90.0, "quick": 40.0, "smoke": 4.0}
+SECONDS = {"full": 90.0, "quick": 8.0, "smoke": 4.0}
 ROBOT_GET_EVERY_S = 5.0
 SEED = 0
 MODES = (("single_loop", ["--single-loop"]), ("apart", []))

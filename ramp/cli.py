@@ -48,6 +48,9 @@ def setup_logging(level: str) -> None:
     handler = logging.StreamHandler(sys.stderr)
     journal = bool(os.environ.get("JOURNAL_STREAM")) and not sys.stderr.isatty()
     handler.setFormatter(JournalFormatter(fmt) if journal else logging.Formatter(fmt))
+    from ramp.common.logthrottle import install as throttle_repeats
+
+    throttle_repeats(handler)  # a connect/close flood is a few lines and a count, not 1,140
     logging.basicConfig(level=getattr(logging, level.upper(), logging.INFO),
                         handlers=[handler], force=True)
     # `transitions` (the watchdog and the attachment machines) logs every transition at INFO;

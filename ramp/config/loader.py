@@ -454,7 +454,7 @@ def _module(c: _Checker, path: str, name: str, type_name: str, cls: type[Module]
         dline = entry.lines.get(dev, entry.line)
         if raw is None:
             c.err(dpath, dline, f"missing; a {type_name} module needs a {spec.kind} device "
-                                f"`{dev}` ({spec.help or 'see the README'})")
+                                f"`{dev}` ({spec.help or 'see docs/operating/configuration.md'})")
             continue
         if not isinstance(raw, LinedMap):
             c.err(dpath, dline, f"expected a mapping with a bus, got {kind_of(raw)}")

@@ -21,7 +21,8 @@ from ramp.mcp.protocol import format_value
 
 #: Functions that only read, by name: the guess for a robot that does not publish kinds.
 READ_FUNCTIONS = frozenset({"get", "describe", "modules"})
-#: The kinds a robot publishes (SPEC 2.2 `describe`; see the README).
+#: The kinds a robot publishes (SPEC 2.2 `describe`; docs/operating/mcp.md, "What a function
+#: does").
 KINDS = ("motion", "stop", "state", "read", "control")
 
 
@@ -67,6 +68,20 @@ class PropertyInfo:
     unit: str = ""
 
 
+#: An interlock rule's severities (SPEC 11); a robot that gives none means `warning`.
+SEVERITIES = ("info", "warning", "error")
+
+
+@dataclass(frozen=True)
+class InterlockInfo:
+    """One interlock rule as `robot:robot.describe` lists it: `robot:interlock.rule=(NAME,
+    SEVERITY)` and, when the rule has one, `robot:interlock.message=(NAME,TEXT)`."""
+
+    name: str
+    severity: str = "warning"
+    message: str = ""
+
+
 @dataclass
 class Catalog:
     """Everything `describe` said: modules, their functions and their get rows."""
@@ -77,6 +92,8 @@ class Catalog:
     properties: dict[str, list[PropertyInfo]] = field(default_factory=dict)
     #: Modules whose describe failed (e.g. `not_attached`), with the robot's reason.
     problems: dict[str, str] = field(default_factory=dict)
+    #: The robot's interlock rules by name (from `robot:robot.describe`).
+    interlocks: dict[str, InterlockInfo] = field(default_factory=dict)
 
     def devices(self, module: str) -> list[str]:
         """Devices of `module` that take requests, in describe order."""
@@ -141,12 +158,25 @@ def build_catalog(robot_rows: Sequence[Response],
             name = value_text(r.values[0])
             if name not in cat.modules:
                 cat.modules.append(name)
+        elif r.module == "robot" and r.device == "interlock" and r.values:
+            _add_interlock(cat, r.prop, [value_text(v) for v in r.values])
     _add_rows(cat, "robot", robot_rows)
     for module, rows in module_rows.items():
         if module not in cat.modules:
             cat.modules.append(module)
         _add_rows(cat, module, rows)
     return cat
+
+
+def _add_interlock(cat: Catalog, prop: str, values: list[str]) -> None:
+    """`rule=(NAME)` (an older robot), `rule=(NAME,SEVERITY)`, `message=(NAME,TEXT)`."""
+    name, rest = values[0], values[1:]
+    known = cat.interlocks.get(name, InterlockInfo(name))
+    if prop == "rule":
+        severity = rest[0] if rest and rest[0] in SEVERITIES else known.severity
+        cat.interlocks[name] = replace(known, severity=severity)
+    elif prop == "message" and rest:
+        cat.interlocks[name] = replace(known, message=", ".join(rest))
 
 
 def _add_rows(cat: Catalog, module: str, rows: Iterable[Response]) -> None:

@@ -20,6 +20,7 @@ from ramp.api import (
     AnalogInput,
     Block,
     Button,
+    Charge,
     DeviceSpec,
     DigitalInput,
     DigitalOutput,
@@ -70,9 +71,11 @@ class BaseModule(Module):
         motors = {w: Motor.from_params(*self.device(devices, w, MotorChannel)) for w in WHEELS}
         self.drive_train = BaseDrive(*(motors[w] for w in WHEELS))
         filt = self.setting(settings, "battery_filter")
+        battery = self.device(devices, "battery", AnalogInput)
         self.voltage = SystemVoltage(
-            Voltage.from_params(*self.device(devices, "battery", AnalogInput)),
+            Voltage.from_params(*battery),
             filt["time_constant"])
+        self.charge = Charge(lambda: self.voltage.value, battery[1])
         self.buttons = {b: Button.from_params(*self.device(devices, b, DigitalInput))
                         for b in ("l_button", "r_button")}
         self.user_led = Led(self.device(devices, "user_led", DigitalOutput)[0])
@@ -96,6 +99,8 @@ class BaseModule(Module):
             self.prop(Property(b, "press", "int", _pressed(self.buttons[b])))
         self.prop(Property("battery", "volt", "float", lambda: self.voltage.value, "V"))
         self.prop(Property("user_led", "on", "int", lambda: int(self.user_led.is_on)))
+        # Beyond table 5.4 (its rows keep their order): the charge from the battery's model.
+        self.prop(Property("battery", "charge", "float", self.charge.read, "%"))
 
     # -- requests -----------------------------------------------------------------------------
     def _drive(self, speed: int, direction: float) -> None:

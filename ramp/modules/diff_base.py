@@ -21,6 +21,7 @@ from ramp.api import (
     AnalogInput,
     Block,
     Button,
+    Charge,
     DeviceSpec,
     DigitalInput,
     FloatParam,
@@ -60,9 +61,11 @@ class DiffBaseModule(Module):
                        for w in WHEELS}
         self.bumpers = {b: Button.from_params(*self.device(devices, b, DigitalInput))
                         for b in BUMPERS}
+        battery = self.device(devices, "battery", AnalogInput)
         self.voltage = SystemVoltage(
-            Voltage.from_params(*self.device(devices, "battery", AnalogInput)),
+            Voltage.from_params(*battery),
             self.setting(settings, "battery_filter")["time_constant"])
+        self.charge = Charge(lambda: self.voltage.value, battery[1])
 
         speed = IntParam(-100, 100)
         self.add(Function(name, "drive", (speed, FloatParam()), self._drive, "motion",
@@ -76,6 +79,7 @@ class DiffBaseModule(Module):
         for b in BUMPERS:
             self.prop(Property(b, "press", "int", self._pressed(b)))
         self.prop(Property("battery", "volt", "float", lambda: self.voltage.value, "V"))
+        self.prop(Property("battery", "charge", "float", self.charge.read, "%"))
 
     def _velocity_of(self, wheel: str) -> Any:
         return lambda: self.wheels[wheel].velocity

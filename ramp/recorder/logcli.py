@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -72,7 +73,35 @@ def cmd_summary(args: argparse.Namespace) -> int:
         print(f"ramp log: {exc}", file=sys.stderr)
         return 2
     report = s.report(rec.files)
-    print(json.dumps(report, indent=2) if args.json else format_report(report))
+    text = json.dumps(report, indent=2) if args.json else escape_controls(format_report(report))
+    return write_out(text)
+
+
+#: Control characters a recorded `/log` message may carry (ESC starts a terminal escape
+#: sequence, BEL rings): every C0 character but newline and tab, DEL, and C1.
+_CONTROLS = {c: f"\\x{c:02x}" for c in (*range(0x20), 0x7F, *range(0x80, 0xA0))
+             if c not in (0x0A, 0x09)}
+
+
+def escape_controls(text: str) -> str:
+    """`text` with its control characters shown as `\\x1b`, never sent to the terminal: a
+    recording is data from the robot, and its log lines must not drive the reader's
+    terminal (move the cursor, retitle the window, hide what follows)."""
+    return text.translate(_CONTROLS)
+
+
+def write_out(text: str) -> int:
+    """Print `text`; a reader that stops early (`| head`) ends the output quietly, as `cat`
+    does, not with a BrokenPipeError traceback."""
+    try:
+        sys.stdout.write(text + "\n")
+        sys.stdout.flush()
+    except BrokenPipeError:
+        # Python flushes stdout again at exit: point it at /dev/null so that is quiet too.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        return 0
     return 0
 
 

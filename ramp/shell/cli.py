@@ -45,6 +45,9 @@ from ramp.shell.render import (
 #: a late answer would pair with the next request).
 DEFAULT_TIMEOUT = 2.0
 MAX_TIMEOUT_S = 3600.0  # an hour: beyond it (1e308) the socket layer overflows
+#: Modules that answer describe without being listed by `robot:robot.describe` (SPEC 12's
+#: `sim`, present only under `--sim`).
+OPTIONAL_MODULES = ("sim",)
 #: At most this often does the shell ask `robot.modules` after a typed line.
 MODULE_CHECK_PERIOD = 1.0
 MAX_WATCH_HZ = 50.0
@@ -321,12 +324,18 @@ class Shell:
         names = [r.values[0] for r in robot_rows
                  if (r.module, r.device, r.prop) == ("robot", "robot", "module") and r.values]
         module_rows: dict[str, list[Response]] = {}
-        if names:
-            # One message for all modules: an error for one does not stop the others.
-            message = "".join(f"{n}:{n}.describe=()" for n in names)
-            rows = self.ask_reader(message)
-            for n in names:
-                module_rows[str(n)] = [r for r in rows if r.module == n]
+        # `sim` (SPEC 12, under --sim) is not a robot module: robot.describe does not list it,
+        # but it describes itself like one. Asked too; kept only where it answers.
+        extra = [m for m in OPTIONAL_MODULES if m not in names]
+        # One message for all modules: an error for one does not stop the others.
+        message = "".join(f"{n}:{n}.describe=()" for n in [*names, *extra])
+        rows = self.ask_reader(message)
+        for n in names:
+            module_rows[str(n)] = [r for r in rows if r.module == n]
+        for n in extra:
+            mine = [r for r in rows if r.module == n]
+            if mine and not any(r.prop == "error" for r in mine):
+                module_rows[n] = mine
         old, self.catalog = self.catalog, build_catalog(robot_rows, module_rows)
         for name in self.catalog.problems:
             # A module in fault cannot describe itself; keep completing what it offered.
@@ -408,8 +417,14 @@ class Shell:
         if names is None:
             return
         shown = ", ".join(names) if names else "none any more"
-        self.say(f"active interlocks: {shown} (robot:robot.get=() shows them; a latched one "
-                 "is cleared with robot:interlock.reset=(NAME) once its condition has cleared)")
+        text = (f"active interlocks: {shown} (robot:robot.get=() shows them; a latched one "
+                "is cleared with robot:interlock.reset=(NAME) once its condition has cleared)")
+        if self.raw:
+            # --raw prints the robot's answers and nothing else: a script reads stdout as
+            # response lines, so the explanation goes to stderr.
+            print(text, file=sys.stderr, flush=True)
+        else:
+            self.say(text)
 
     def cmd_help(self) -> int:
         timeout = None

@@ -62,7 +62,8 @@ Plugging in the executive:
     mission.observe_control(owner)        # robot:control.owner, "none" when free
     mission.report_fault("watchdog tripped")
 
-What each working state's activity must do is in `table.STATES` (and the README's table);
+What each working state's activity must do is in `table.STATES` (and the table on
+docs/autonomy/state-machine.md);
 the contract every activity keeps is in `activity.py`.
 """
 

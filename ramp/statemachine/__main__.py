@@ -1,7 +1,7 @@
 """`python -m ramp.statemachine --mermaid | --states`: the mission drawn from its own machine.
 
 `--mermaid` prints the state diagram (mermaid `stateDiagram-v2`) and `--states` the table of
-states, exactly as the README's section "The mission state machine" holds them.
+states, exactly as the docs page docs/autonomy/state-machine.md holds them.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
-"""Draw the mission from the machine itself: a mermaid `stateDiagram-v2`, and the README's
-table of states.
+"""Draw the mission from the machine itself: a mermaid `stateDiagram-v2`, and the table of
+states on the docs page `docs/autonomy/state-machine.md`.
 
 Walks `machine.states` and `machine.events` (not `transitions`' graphviz extension, which
-needs graphviz), so the picture is the machine: the README holds the output of
+needs graphviz), so the picture is the machine: docs/autonomy/state-machine.md holds the output of
 `python -m ramp.statemachine --mermaid`, and a test checks that it still is.
 
 Drawing rules, for readability only (every edge is still there):
@@ -108,7 +108,8 @@ def mermaid(machine: Machine) -> str:
 
 
 def states_table() -> str:
-    """The README's table of states, from `table.STATES`, ending with a newline."""
+    """The table of states (docs/autonomy/state-machine.md), from `table.STATES`, ending
+    with a newline."""
     rows = ["| state | part | what it does | drives | stops the robot | timeout |",
             "|---|---|---|---|---|---|"]
     for s in STATES:

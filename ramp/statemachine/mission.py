@@ -59,6 +59,9 @@ from ramp.statemachine.table import (
     TRANSITIONS,
     Resumes,
 )
+from ramp.statemachine.table import (
+    RECOVERY as RECOVERY_STATES,
+)
 
 log = logging.getLogger("ramp.statemachine")
 # `transitions` logs every callback at INFO; the one line per change that matters is ours.
@@ -69,6 +72,9 @@ CONDITIONS = ("pose_confident", "resuming", "step_retries_left", "must_relocaliz
               "out_of_tries", "time_for_another_cycle")
 CALLBACKS = ("note_loss", "note_problem", "note_pause", "count_relocalize", "count_retry")
 NO_OWNER = "none"  # what `robot:control.owner` reads when nobody holds control
+#: What the mission knows of its pose (`Mission.localization`): no fix yet, a fix, lost (a
+#: loss the machine took and has not recovered from), or re-localizing after a hand-back.
+LOCALIZATION = ("none", "ok", "lost", "relocalizing")
 
 
 class MissionError(RuntimeError):
@@ -84,6 +90,8 @@ class StateChange:
     dest: str
     trigger: str
     reason: str
+    #: The localization after the change (`LOCALIZATION`); "" where the sender had none.
+    localization: str = ""
 
     def line(self) -> str:
         return f"mission: {self.source} -> {self.dest} ({self.reason})"
@@ -130,6 +138,8 @@ class Mission:
         self.has_control = False
         self.interrupted: str | None = None  # the run's task to resume after a problem
         self._must_relocalize = False
+        self._fixed = False  # a first pose was found
+        self._lost = False  # a loss was taken and the pose not found again
         self._relocalize_tries = 0
         self._step_retries = 0
         self._retry_step: str | None = None  # the task whose finish resets the counters
@@ -219,6 +229,15 @@ class Mission:
         return self._model.state
 
     @property
+    def localization(self) -> str:
+        """One of `LOCALIZATION`, from the machine's own bookkeeping (not from names)."""
+        if self._lost:
+            return "lost"
+        if self.state in RECOVERY_STATES:
+            return "relocalizing"
+        return "ok" if self._fixed else "none"
+
+    @property
     def activity(self) -> Activity | None:
         return self._activity
 
@@ -264,6 +283,7 @@ class Mission:
             self.interrupted = self._retry_step = source
             self.context.localization_losses += 1
         self._must_relocalize = True
+        self._lost = True
         self.context.last_problem = _reason_of(event)
 
     def note_problem(self, event: EventData) -> None:
@@ -316,11 +336,16 @@ class Mission:
             self._reset_tries()
         if source == "relocalize" and dest == "resume":
             self._must_relocalize = False
+            self._lost = False
+            self._fixed = True
+        if source == "initial_localization" and trigger == "finished":
+            self._fixed = True
         resumed = self.interrupted if source == "resume" else None
         if resumed is not None:
             self.interrupted = None
         self._measure(source, trigger, dest, now)
-        change = StateChange(now, source, dest, trigger, self._why(event, resumed))
+        change = StateChange(now, source, dest, trigger, self._why(event, resumed),
+                             self.localization)
         self.last_change = change
         level = logging.WARNING if dest in ("stop", "paused", "waiting_for_operator") \
             else logging.INFO

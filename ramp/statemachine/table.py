@@ -2,7 +2,8 @@
 
 Nothing here runs: `ramp.statemachine.mission.Mission` builds a `transitions` machine from
 these tables, `ramp.statemachine.diagram` draws them, and the tests check their invariants.
-To change the mission's flow, change the tables; the machine, the diagram in the README and
+To change the mission's flow, change the tables; the machine, the diagram on
+docs/autonomy/state-machine.md and
 the checks follow.
 
 - `STATES`: every state with what it does, whether an activity drives it, whether it may
@@ -30,7 +31,7 @@ from typing import Any
 @dataclass(frozen=True)
 class StateSpec:
     name: str
-    does: str  # one line for the README's table
+    does: str  # one line for the table on docs/autonomy/state-machine.md
     group: str = ""  # "run" (thesis figure 5.35), "recovery", "control" or ""
     activity: bool = True  # an activity from the Executive drives it
     drives: bool = False  # may move the robot across the ground: needs a confident pose

@@ -5,24 +5,26 @@ from what the console knows (the robot's poll, the autonomy's view, the links) e
 that changes; an alert keeps the time it was first raised while its cause lasts, and goes
 when the cause clears. An error alert offers Take control; a latched fault offers Reset
 (`MODULE:DEVICE.reset=()`).
+
+Everything is read from data the robot and the autonomy publish, never from names kept
+here: an interlock's severity and advice from describe (`robot:interlock.rule=(NAME,
+SEVERITY)`, `robot:interlock.message=(NAME,TEXT)`), latched faults from describe's `reset`
+functions, the battery's charge from its `%` row, the localization from the view's enum.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
+
+from ramp.mcp.describe import Catalog, InterlockInfo
 
 SEVERITIES = ("error", "warning", "info")
 #: Localization confidence under which the operator is warned.
 CONFIDENCE_LOW = 0.5
-#: Battery charge (%, from the console's EMPTY:FULL volts) under which it is low.
+#: Battery charge (%) under which it is low.
 BATTERY_LOW_PCT = 20.0
-#: Mission states in which the autonomy is recovering a lost localization.
-RECOVERY = ("relevel", "rescan", "relocalize")
-#: States before the first fix: a zero confidence there is no alarm.
-BEFORE_FIX = ("", "idle", "acquire_control", "initial_localization", "done")
-#: Properties whose value 1 is a latched fault (SPEC 2.2: `ble:lift.stalled=(1)`).
-LATCHED_PROPS = ("stalled", "jammed", "latched", "fault")
 
 
 @dataclass(frozen=True)
@@ -51,16 +53,43 @@ class Inputs:
     values: dict[str, str] = field(default_factory=dict)
     states: dict[str, str] = field(default_factory=dict)
     errors: dict[str, str] = field(default_factory=dict)
-    #: `module:device.property` keys of the robot's volt readings.
+    #: `module:device.property` keys of the robot's battery readings: a charge in % (the
+    #: robot's own battery model) or, for a robot that gives none, volts.
     batteries: tuple[str, ...] = ()
+    #: Volts of an empty and a full battery, for volts-only readings (`--battery`).
     battery_range: tuple[float, float] = (17.0, 21.0)
     operator: str = "operator"
     #: None: the console has no --autonomy.
     autonomy: dict[str, Any] | None = None
+    #: The robot's interlock rules by name (describe): severity and message.
+    interlocks: Mapping[str, InterlockInfo] = field(default_factory=dict)
+    #: `module:device.property` keys of latched-fault flags (`latch_flags`).
+    latches: tuple[str, ...] = ()
+
+
+def latch_flags(cat: Catalog) -> tuple[str, ...]:
+    """The get rows that say a device's fault is latched, from describe alone: a device with
+    a `reset` function (SPEC 2.2 lists one per latchable device) and an int row that no
+    function of the device sets (`ble:lift.stalled`, not the `vel` it echoes)."""
+    out: list[str] = []
+    for module, props in cat.properties.items():
+        for p in props:
+            names = {f.name for f in cat.functions_of(module, p.device)}
+            if "reset" in names and p.type.split(" ")[0] == "int" and p.name not in names:
+                out.append(f"{module}:{p.device}.{p.name}")
+    return tuple(out)
+
+
+def active_interlocks(values: Mapping[str, str]) -> list[str]:
+    """The names in `robot:interlock.active` (none: `none`)."""
+    text = values.get("robot:interlock.active", "")
+    return [n for n in text.split(",") if n and n not in ("none", "()")]
 
 
 def raised(i: Inputs) -> list[Alert]:
-    """Every alert whose cause holds now."""
+    """Every alert whose cause holds now. Each one is something the operator should act on
+    or know now (ISA-18.2: no alarm without an action); what only shapes normal work (an
+    `info` interlock, a re-localization) is state on the panels and a line in Events."""
     out: list[Alert] = []
     if not i.robot_reachable:
         out.append(Alert("robot-link", "error", "Robot link lost",
@@ -76,42 +105,66 @@ def raised(i: Inputs) -> list[Alert]:
                              "Check its wiring or power."))
         elif state == "detached":
             out.append(Alert(f"module:{module}", "warning", f"Module {module} detached",
-                             f"{why + '. ' if why else ''}It attaches by itself when its "
-                             "device appears."))
-    for key, value in sorted(i.values.items()):
+                             f"{why + '. ' if why else ''}Its requests are refused until its "
+                             "device appears (it attaches by itself): check its cable and "
+                             "power if it should be there."))
+    for key in i.latches:
+        value = i.values.get(key)
+        if value is None or value.split(",")[0] not in ("1", "1.0"):
+            continue
         module, _, rest = key.partition(":")
         device, _, prop = rest.partition(".")
-        if prop in LATCHED_PROPS and value.split(",")[0] in ("1", "1.0"):
-            out.append(Alert(f"latched:{module}:{device}", "error",
-                             f"Latched fault: {module}:{device} {prop}",
-                             f"{key}=({value}): its motion is refused until the fault is "
-                             "acknowledged. Take control, look at the robot, clear the cause, "
-                             "then Reset (it sends "
-                             f"{module}:{device}.reset=()).", reset=f"{module}:{device}"))
-    active = i.values.get("robot:interlock.active", "")
-    if active and active not in ("none", "()"):
-        out.append(Alert("interlock", "warning", f"Interlock active: {active}",
-                         "Some motion is refused or limited while it holds (the robot "
-                         "answers `interlocked`). Change what trips it (e.g. the lift's "
-                         "position); a latched interlock needs robot:interlock.reset."))
+        out.append(Alert(f"latched:{module}:{device}", "error",
+                         f"Latched fault: {module}:{device} {prop}",
+                         f"{key}=({value}): its motion is refused until the fault is "
+                         "acknowledged. Take control, look at the robot, clear the cause, "
+                         f"then Reset (it sends {module}:{device}.reset=()).",
+                         reset=f"{module}:{device}"))
+    out += _interlocks(i)
     if i.values.get("robot:watchdog.state") == "tripped":
         out.append(Alert("watchdog", "warning", "Watchdog tripped",
                          "Every module was stopped (a silent or lost client, or a stall). "
                          "Motion resumes only on a new command; release and press the "
                          "dead-man to drive."))
+    out += _batteries(i)
+    if i.autonomy is not None:
+        out.extend(_autonomy(i.autonomy, i.values.get("robot:control.owner", ""), i.operator))
+    return out
+
+
+def _interlocks(i: Inputs) -> list[Alert]:
+    """One alert per active `warning` or `error` rule, with the rule's own advice."""
+    out: list[Alert] = []
+    for name in active_interlocks(i.values):
+        rule = i.interlocks.get(name, InterlockInfo(name))
+        if rule.severity == "info":
+            continue
+        advice = rule.message or ("Change what trips it (see its `when:` in the robot's "
+                                  "YAML, `ramp check --explain`)")
+        out.append(Alert(f"interlock:{name}", rule.severity, f"Interlock active: {name}",
+                         f"{advice.rstrip('.')}. Meanwhile some motion is refused or "
+                         "limited (the robot answers `interlocked`); a latched rule needs "
+                         f"robot:interlock.reset=({name}) once its cause is gone."))
+    return out
+
+
+def _batteries(i: Inputs) -> list[Alert]:
+    out: list[Alert] = []
     empty, full = i.battery_range
     for key in i.batteries:
         try:
-            volts = float(i.values.get(key, "").split(",")[0])
+            reading = float(i.values.get(key, "").split(",")[0])
         except ValueError:
             continue
-        pct = 100.0 * (volts - empty) / (full - empty)
+        if key.endswith(".charge"):
+            pct, shown = reading, f"{reading:.0f} %"
+        else:
+            pct = 100.0 * (reading - empty) / (full - empty)
+            shown = f"{reading:.2f} V ({max(0.0, pct):.0f} %)"
         if pct < BATTERY_LOW_PCT:
             out.append(Alert(f"battery:{key}", "warning", "Battery low",
-                             f"{key} reads {volts:.2f} V ({max(0.0, pct):.0f} %). Finish the "
-                             "run or bring the robot back to change it."))
-    if i.autonomy is not None:
-        out.extend(_autonomy(i.autonomy, i.values.get("robot:control.owner", ""), i.operator))
+                             f"{key} reads {shown}. Finish the run or bring the robot back "
+                             "to change it."))
     return out
 
 
@@ -120,29 +173,26 @@ def _autonomy(a: dict[str, Any], owner: str, operator: str) -> list[Alert]:
     if not a.get("connected"):
         return [Alert("autonomy-view", "warning", "Autonomy view unreachable",
                       f"{a.get('detail', '')}. Teleoperation works without it; the console "
-                      "keeps trying.")]
+                      "keeps trying. Check that the autonomy runs with --foxglove-port.")]
     if a.get("stale"):
         out.append(Alert("autonomy-view", "warning", "Autonomy view stale",
                          "No news from the autonomy for 3 s: what the map shows may be old. "
                          "Watch the robot itself; take control if in doubt."))
     state, reason = str(a.get("state", "")), str(a.get("reason", ""))
+    localization = str(a.get("localization", ""))
     confidence = (a.get("numbers") or {}).get("pose_confidence")
     if state == "waiting_for_operator":
         out.append(Alert("mission-waiting", "error", "Mission waiting for the operator",
                          f"{reason or 'the autonomy gave up'}. Take control, drive or fix "
                          "what is wrong, then Hand back: the mission re-localizes and "
                          "resumes."))
-    elif a.get("lost") and state in RECOVERY + ("stop", "resume"):
+    elif localization == "lost" and state != "paused":
         out.append(Alert("localization", "error", "Localization lost",
                          f"The autonomy stopped and is recovering ({state}"
                          f"{': ' + reason if reason else ''}). If it does not find itself "
                          "again, take control and drive it where the walls are in view."))
-    elif state in RECOVERY:
-        out.append(Alert("localization", "info", "Re-localizing",
-                         f"The autonomy is finding its pose again ({state}) before it goes "
-                         "on; it does not drive meanwhile."))
-    elif isinstance(confidence, int | float) and confidence < CONFIDENCE_LOW \
-            and state not in BEFORE_FIX and state != "paused":
+    elif localization == "ok" and isinstance(confidence, int | float) \
+            and confidence < CONFIDENCE_LOW and state != "paused":
         out.append(Alert("confidence", "warning", "Localization confidence low",
                          f"Confidence {confidence:.2f} (under {CONFIDENCE_LOW}). The autonomy "
                          "may be lost soon; be ready to take control."))

@@ -6,8 +6,8 @@ console must not need it: a view that is absent or unreachable is reported and r
 nothing else waits for it.
 
 Only what is drawn, at the rate it is drawn (RMC scored the operator link's bandwidth):
-- `/mission/state` and `/map` stay subscribed: they are sent only when they change, and the
-  server gives their last message at once (latched);
+- `/mission/state`, `/map`, `/obstacles` and `/arena` stay subscribed: they are sent only
+  when they change, and the server gives their last message at once (latched);
 - `/pose/estimated`, `/pose/true` (a simulator's), `/mission/numbers` are published at
   10 Hz; the console takes one of each every `pose_period` (0.5 s): it subscribes, and
   unsubscribes as soon as each has come;
@@ -37,10 +37,8 @@ SUBPROTOCOL = "foxglove.websocket.v1"
 STATE, MAP = "/mission/state", "/map"
 POSE, TRUE_POSE, NUMBERS, SCAN = "/pose/estimated", "/pose/true", "/mission/numbers", \
     "/lidar/scan"
-ALWAYS = (STATE, MAP)
-#: States a lost mission passes through before it is found again (or gives up).
-LOST_STATES = ("stop", "relevel", "rescan", "relocalize", "resume", "waiting_for_operator",
-               "paused")
+ARENA, OBSTACLES = "/arena", "/obstacles"
+ALWAYS = (STATE, MAP, ARENA, OBSTACLES)
 POSE_PERIOD_S = 0.5
 SCAN_PERIOD_S = 2.0
 RETRY_S = 1.0
@@ -63,9 +61,8 @@ class ViewState:
     reason: str = ""
     #: Loop time at which the mission entered `state` (from the message's stamp).
     state_since: float | None = None
-    #: The mission lost its localization and has not found it again (a re-localization
-    #: after a hand-back passes through the same states without being lost).
-    lost: bool = False
+    #: The mission's localization as it publishes it (`none`, `ok`, `lost`, `relocalizing`).
+    localization: str = ""
     numbers: dict[str, Any] = field(default_factory=dict)
     pose: tuple[float, float, float] | None = None
     true_pose: tuple[float, float, float] | None = None
@@ -86,7 +83,7 @@ class ViewState:
         return {
             "connected": self.connected, "detail": self.detail, "stale": self.stale(now),
             "state": self.state, "previous": self.previous, "trigger": self.trigger,
-            "reason": self.reason, "lost": self.lost,
+            "reason": self.reason, "localization": self.localization,
             "in_state_s": None if self.state_since is None else round(now - self.state_since,
                                                                       1),
             "numbers": self.numbers, "pose": self.pose, "true_pose": self.true_pose,
@@ -138,11 +135,15 @@ def _points(line: dict[str, Any]) -> list[tuple[float, float]]:
             for p in line.get("points") or []]
 
 
-def map_view(scene: dict[str, Any]) -> dict[str, Any]:
+def map_view(scene: dict[str, Any], previous: dict[str, Any] | None = None) -> dict[str, Any]:
     """A `foxglove.SceneUpdate` of the autonomy's map, as the page draws it: walls, regions,
-    collector, detected rocks and craters, the plan's legs, the robot's footprint."""
-    out: dict[str, Any] = {"walls": [], "regions": [], "collector": [], "rocks": [],
-                           "craters": [], "plan": [], "robot": [1.2, 0.75]}
+    collector, the plan's legs. The obstacles (`/obstacles`) and the arena's size (`/arena`)
+    come on their own typed channels and are kept from `previous`."""
+    out: dict[str, Any] = {"walls": [], "regions": [], "collector": [], "plan": [],
+                           "obstacles": [], "arena": None, "robot": [1.2, 0.75]}
+    for key in ("obstacles", "arena", "robot"):
+        if previous and previous.get(key) is not None:
+            out[key] = previous[key]
     for entity in scene.get("entities") or []:
         lines = entity.get("lines") or []
         meta = {m.get("key"): m.get("value") for m in entity.get("metadata") or []
@@ -159,14 +160,31 @@ def map_view(scene: dict[str, Any]) -> dict[str, Any]:
         if lines:
             out["walls"] = _points(lines[0])
             out["plan"] = [_points(line) for line in lines[1:]]
-        for c in entity.get("cylinders") or []:
-            p = (c.get("pose") or {}).get("position") or {}
-            colour = c.get("color") or {}
-            disc = [round(float(p.get("x", 0.0)), 3), round(float(p.get("y", 0.0)), 3),
-                    round(float((c.get("size") or {}).get("x", 0.0)) / 2, 3)]
-            is_rock = float(colour.get("r", 0.0)) >= float(colour.get("b", 0.0))
-            out["rocks" if is_rock else "craters"].append(disc)
+    size = out["arena"]
+    if size is not None:  # `/arena` says it as typed fields: it wins over metadata text
+        out["robot"] = [size["robot_length_m"], size["robot_width_m"]]
     return out
+
+
+def obstacles_view(msg: dict[str, Any]) -> list[dict[str, Any]]:
+    """`ramp.Obstacles` as the page draws it: kind, x, y, radius (unknown kinds kept: the
+    page draws them as obstacles of no known kind)."""
+    out = []
+    for o in msg.get("obstacles") or []:
+        with contextlib.suppress(TypeError, ValueError, AttributeError):
+            out.append({"kind": str(o.get("kind", "")), "x": round(float(o["x"]), 3),
+                        "y": round(float(o["y"]), 3), "radius": round(float(o["radius"]), 3)})
+    return out
+
+
+def arena_view(msg: dict[str, Any]) -> dict[str, float] | None:
+    """`ramp.Arena` as the page draws it (None when it does not make sense)."""
+    try:
+        out = {k: float(msg[k]) for k in ("length_m", "width_m", "robot_length_m",
+                                           "robot_width_m")}
+    except (KeyError, TypeError, ValueError):
+        return None
+    return out if all(math.isfinite(v) and v > 0 for v in out.values()) else None
 
 
 class AutonomyLink:
@@ -317,10 +335,7 @@ class AutonomyLink:
         if topic == STATE:
             v.state, v.previous = str(msg.get("state", "")), str(msg.get("from", ""))
             v.trigger, v.reason = str(msg.get("trigger", "")), str(msg.get("reason", ""))
-            if v.trigger == "lost" or v.reason.startswith("lost"):
-                v.lost = True
-            elif v.state not in LOST_STATES:
-                v.lost = False
+            v.localization = str(msg.get("localization", ""))
             age = (time.time_ns() - stamp_ns) / 1e9
             v.state_since = now - age if 0 <= age < 86_400 else now
         elif topic == NUMBERS:
@@ -336,8 +351,17 @@ class AutonomyLink:
             else:
                 v.true_pose = value
         elif topic == MAP:
-            v.map = map_view(msg)
+            v.map = map_view(msg, v.map)
             v.map_version += 1
+        elif topic == OBSTACLES:
+            v.map = dict(v.map, obstacles=obstacles_view(msg))
+            v.map_version += 1
+        elif topic == ARENA:
+            size = arena_view(msg)
+            if size is not None:
+                v.map = dict(v.map, arena=size,
+                             robot=[size["robot_length_m"], size["robot_width_m"]])
+                v.map_version += 1
         elif topic == SCAN:
             v.scan = scan_points(msg)
             v.scan_at = now

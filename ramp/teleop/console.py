@@ -21,7 +21,7 @@ from ramp.mcp.describe import READ_FUNCTIONS, Catalog, error_text
 from ramp.mcp.messages import Request, Response
 from ramp.mcp.protocol import format_requests, parse_message
 from ramp.mcp.session import Reply
-from ramp.teleop.alerts import AlertBook, Inputs, raised
+from ramp.teleop.alerts import AlertBook, Inputs, active_interlocks, latch_flags, raised
 from ramp.teleop.autonomy import AutonomyLink
 from ramp.teleop.controller import Controller, Message, module_stop
 from ramp.teleop.gate import PROBE, MotionGate
@@ -56,6 +56,19 @@ def is_motion(r: Request, catalog: Catalog | None = None) -> bool:
     if catalog is not None:
         return catalog.kind_of(r.module, r.device, r.function) == "motion"
     return r.function not in READ_FUNCTIONS and r.function != "stop"
+
+
+def battery_keys(cat: Catalog) -> tuple[str, ...]:
+    """Each battery's reading for the low-battery alert: its charge in % where the robot
+    gives one (its own battery model), else its volts (the console's `--battery` range)."""
+    out: list[str] = []
+    props = [p for ps in cat.properties.values() for p in ps]
+    charged = {(p.module, p.device) for p in props if p.unit == "%" and p.name == "charge"}
+    for p in props:
+        if (p.unit == "%" and p.name == "charge") or \
+                (p.unit == "V" and (p.module, p.device) not in charged):
+            out.append(f"{p.module}:{p.device}.{p.name}")
+    return tuple(out)
 
 
 def refused_modules(requests: list[Request], responses: list[Response]) -> set[str]:
@@ -124,6 +137,8 @@ class Console:
         self._bandwidth: dict[str, Any] = {}
         self._counted: tuple[float, int, int] | None = None  # (time, mcp bytes, view bytes)
         self._started_at = 0.0
+        self._interlocks: set[str] = set()
+        self._mission_state = ""
 
     # -- lifecycle ------------------------------------------------------------------------------
     def now(self) -> float:
@@ -167,8 +182,7 @@ class Console:
         self.pages[page] = sink
         self.controller.open_page(page, self.now())
         sink(self.hello())
-        sink({"type": "catalog", "modules": catalog_view(self.poller.catalog,
-                                                          self.poller.status.states)})
+        sink(self.catalog_message())
         sink(self.status_message(self.poller.status))
         if self.autonomy is not None:
             view = self.autonomy.view
@@ -347,9 +361,26 @@ class Console:
             if fresh:
                 self._interrupted("watchdog tripped")
         self._watchdog_state = state
+        self._note_interlocks(status)
         self._broadcast(self.status_message(status))
         self._push_drive_views()
         self._update_alerts()
+
+    def _note_interlocks(self, status: Status) -> None:
+        """Each activation and release of an interlock is a line in Events; an `info` rule
+        (normal work, SPEC 11) is only that, never an alert."""
+        now = set(active_interlocks(status.values)) if status.reachable else self._interlocks
+        rules = self.poller.catalog.interlocks
+        for name in sorted(now ^ self._interlocks):
+            rule = rules.get(name)
+            severity = rule.severity if rule is not None else "warning"
+            on = name in now
+            text = f"interlock {name} {'active' if on else 'released'} ({severity})"
+            if on and rule is not None and rule.message:
+                text += f": {rule.message}"
+            self._broadcast({"type": "event", "level": "info" if severity == "info" or not on
+                             else "warning", "text": text})
+        self._interlocks = now
 
     # -- the autonomy's view, alerts, bandwidth -------------------------------------------------
     def autonomy_message(self) -> dict[str, Any]:
@@ -360,22 +391,26 @@ class Console:
     def _on_autonomy(self, kind: str) -> None:
         assert self.autonomy is not None
         view = self.autonomy.view
-        if kind == "/map":
+        if kind in ("/map", "/obstacles", "/arena"):
             self._broadcast({"type": "autonomy_map", "map": view.map})
         elif kind == "/lidar/scan":
             self._broadcast({"type": "autonomy_scan", "points": view.scan})
+        elif kind == "/mission/state" and view.state != self._mission_state:
+            self._mission_state = view.state
+            self._broadcast({"type": "event", "level": "info",
+                             "text": f"mission: {view.previous or '?'} -> {view.state}"
+                                     f"{' (' + view.reason + ')' if view.reason else ''}"})
         self._broadcast(self.autonomy_message())
         self._update_alerts()
 
     def _update_alerts(self) -> None:
         status = self.poller.status
-        volts = tuple(f"{p.module}:{p.device}.{p.name}"
-                      for props in self.poller.catalog.properties.values() for p in props
-                      if p.unit == "V")
+        cat = self.poller.catalog
         inputs = Inputs(robot_reachable=status.reachable or status.polls == 0,
                         robot_detail=status.detail, values=status.values, states=status.states,
-                        errors=status.errors, batteries=volts, battery_range=self.battery,
-                        operator=self.name,
+                        errors=status.errors, batteries=battery_keys(cat),
+                        battery_range=self.battery, operator=self.name,
+                        interlocks=cat.interlocks, latches=latch_flags(cat),
                         autonomy=None if self.autonomy is None else
                         self.autonomy.view.summary(self.now()))
         if self.alerts.update(raised(inputs), self.now()):
@@ -414,8 +449,14 @@ class Console:
         self._counted = (now, mcp, view)
 
     def _on_catalog(self, catalog: Catalog) -> None:
-        self._broadcast({"type": "catalog",
-                         "modules": catalog_view(catalog, self.poller.status.states)})
+        self._broadcast(self.catalog_message())
+
+    def catalog_message(self) -> dict[str, Any]:
+        """The tree the page draws, and the interlock rules it names in the robot panel."""
+        cat = self.poller.catalog
+        return {"type": "catalog", "modules": catalog_view(cat, self.poller.status.states),
+                "interlocks": {n: {"severity": r.severity, "message": r.message}
+                               for n, r in cat.interlocks.items()}}
 
     def status_message(self, status: Status) -> dict[str, Any]:
         owner = status.values.get("robot:control.owner", "")

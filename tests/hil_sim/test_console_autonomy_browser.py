@@ -146,6 +146,13 @@ def test_the_operator_sees_the_mission_and_takes_over_from_an_error_alert_then_h
             # Past the first fix: the autonomy knows where it is and says so.
             wait_for(lambda: float(page.get_by_test_id("autonomy-confidence").text_content()
                                    or 0) > 0.5, 60, "a localization fix")
+            # The view's typed localization, not a reading of state names or reasons.
+            expect(page.get_by_test_id("autonomy-localization")).to_have_text(
+                "ok", timeout=30_000)
+            # Normal work raises no alert (an info interlock such as digging_creep is panel
+            # state, SPEC 11): nothing to act on, nothing shown as a problem.
+            expect(page.locator('[data-testid="alert"][data-severity="warning"]')).to_have_count(
+                0, timeout=5_000)
             if os.environ.get("RAMP_UPDATE_DOCS") == "1":
                 # The docs' picture: with the obstacles detected and the plan on the map.
                 expect(page.get_by_test_id("autonomy-state")).to_contain_text(

@@ -95,6 +95,8 @@ def test_battery_reads_lower_under_load(h: SimHarness) -> None:
     h.advance(5.0)
     rest = num(c.ask("base:base.get=()"), "base:battery.volt")
     assert 17.0 < rest < 21.5
+    # MARTE's 5S model (ramp.yaml): fresh packs in the sim read well charged.
+    assert 80.0 <= num(c.ask("base:base.get=()"), "base:battery.charge") <= 100.0
     h.world.place(1.0, 1.94, 0.0)
     drive(h, c, "base:base.drive=(100,90)ble:chain.vel=(100)", 6.0)
     loaded = num(c.ask("base:base.get=()"), "base:battery.volt")

@@ -163,3 +163,31 @@ def test_a_sim_bus_without_sim_is_a_config_error_not_a_traceback(tmp_path: Path)
     assert proc.stderr.startswith(f"{cfg}:3: buses.io.driver: the sim driver stands in for "
                                   "hardware only under `ramp run --sim`")
     assert "Traceback" not in proc.stderr
+
+
+def test_a_connect_close_flood_is_a_few_log_lines_not_hundreds(tmp_path: Path) -> None:
+    """Issue 35: a client connecting and closing in a loop wrote 1,140 WARNING lines in 10 s
+    (153 in 3 s here before); the console handler rate-limits repeats of one kind."""
+    err_path = tmp_path / "stderr"
+    with err_path.open("w") as err:
+        proc, host, port = start(["--sim", "--host", "127.0.0.1", "--port", "0"], stderr=err)
+        try:
+            t0 = time.monotonic()
+            n = 0
+            while time.monotonic() - t0 < 3.0:
+                socks = [socket.create_connection((host, port)) for _ in range(12)]
+                for s in socks:
+                    s.close()
+                n += len(socks)
+            time.sleep(0.3)
+        finally:
+            proc.send_signal(signal.SIGTERM)
+            proc.wait(timeout=15)
+            if proc.stdout is not None:
+                proc.stdout.close()
+    text = err_path.read_text()
+    assert n > 100
+    refused = [x for x in text.splitlines() if "WARNING ramp.server: refused" in x]
+    assert 1 <= len(refused) <= 5, text
+    assert text.count("WARNING") <= 12, text
+    assert "stopped: every motor commanded to zero" in text  # what matters still shows

@@ -34,8 +34,11 @@ def test_scout_attaches_both_modules_with_spec_10_names(scout: SimHarness) -> No
     base = rows(c.ask("base:base.get=()"))
     assert set(base) == {"base:left_wheel.vel", "base:right_wheel.vel",
                          "base:bumper_left.press", "base:bumper_right.press",
-                         "base:battery.volt"}
+                         "base:battery.volt", "base:battery.charge"}
     assert 12.0 < float(base["base:battery.volt"]) < 12.7
+    # Scout's 3S pack from its YAML model: a fresh battery reads nearly full, never 0 %.
+    assert 90.0 <= float(base["base:battery.charge"]) <= 100.0
+    assert "base:battery.property=(charge,float,%)" in c.ask("base:base.describe=()")
     arm = rows(c.ask("arm:arm.get=()"))
     assert arm == {"arm:shoulder.pos": "0.0", "arm:shoulder.target": "0.0",
                    "arm:elbow.pos": "90.0", "arm:elbow.target": "90.0",

@@ -4,6 +4,7 @@ from the page with no code of its own, in Debian's chromium (as test_teleop_brow
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import tempfile
 import time
@@ -57,6 +58,12 @@ def test_the_arm_plugin_is_on_the_console_and_moves_from_it(
                 expect(page.get_by_test_id("tree:base")).to_contain_text("bumper_left")
                 expect(page.get_by_test_id("value:arm:arm.stowed")).to_have_text("1",
                                                                                  timeout=5000)
+                # Issue 35: Scout's fresh 3S pack read "12.57 V · 0 %" against MARTE's
+                # 17-21 V; the gauge now shows the robot's own charge (its YAML model).
+                gauge = page.locator('[data-gauge="base:battery.volt"] .gauge-volts')
+                expect(gauge).to_have_text(re.compile(r"^12\.\d\d V · (9\d|100) %$"),
+                                           timeout=5000)
+                expect(page.get_by_test_id("alert")).to_have_count(0)
                 with McpClient(*scout, timeout=5.0) as mcp:
                     box = page.get_by_test_id("call:arm:shoulder.pos")
                     box.fill("45")

@@ -139,6 +139,20 @@ def test_tab_after_module_offers_its_devices(shell: pexpect.spawn) -> None:
     expect_exact(shell, "base:lf_wheel.vel (int -100..100)")
 
 
+def test_tab_after_sim_offers_the_sim_module_s_devices(shell: pexpect.spawn) -> None:
+    """Issue 35: `sim:` (SPEC 12, not listed by robot.describe) completed nothing."""
+    shell.send("sim:")
+    shell.send("\t")
+    expect_exact(shell, "input")
+    shell.send("\x03")
+    expect_exact(shell, PROMPT)
+    shell.send("sim:bus.")
+    shell.send("\t")
+    expect_exact(shell, "unplug")
+    shell.send("\x03")
+    expect_exact(shell, PROMPT)
+
+
 def test_get_renders_a_table_with_units_and_history_is_saved(
         shell: pexpect.spawn, term_env: dict[str, str]) -> None:
     shell.sendline("base:base.get=()")
@@ -237,6 +251,13 @@ def test_c_a_request_refused_by_an_interlock_says_which_are_active(server: str) 
         assert proc.returncode == 1
         assert "interlocked: chain_needs_ladder_down is active" in proc.stdout
         assert "active interlocks: chain_needs_ladder_down, bin_up_slow (" in proc.stdout
+        # --raw: stdout is the robot's answer line and nothing else (issue 35); the
+        # explanation goes to stderr.
+        raw = run_c(server, "--raw", "-c", "ble:chain.vel=(30)")
+        assert raw.returncode == 1
+        assert raw.stdout.splitlines() == [
+            "ble:chain.error=(interlocked,chain_needs_ladder_down is active)"], raw.stdout
+        assert "active interlocks: chain_needs_ladder_down" in raw.stderr
     finally:
         assert run_c(server, "-c", "sim:input.clear=(ble,lift_pot)").returncode == 0
 

@@ -459,3 +459,67 @@ def test_another_sites_page_cannot_open_the_console_socket(teleop: Teleop) -> No
         pass
     with connect(ws_url, origin=teleop.url.rstrip("/"), open_timeout=5) as ws:
         assert '"type":"hello"' in str(ws.recv(timeout=5))
+
+
+def test_at_1500_px_every_ble_control_stays_inside_its_panel(browser: Any,
+                                                             teleop: Teleop) -> None:
+    """Issue 35: the lift's presets pushed `retract` out of the BLE panel at 1500 px."""
+    page = browser.new_page()
+    try:
+        page.set_viewport_size({"width": 1500, "height": 1000})
+        page.goto(teleop.url)
+        retract = page.get_by_test_id("call:ble:lift.retract")
+        sync_api.expect(retract).to_be_visible(timeout=5000)
+        panel = page.locator('[data-module="ble"]').bounding_box()
+        for testid in ("call:ble:lift.retract", "call:ble:lift.pos", "call:ble:lift.extend"):
+            box = page.get_by_test_id(testid).bounding_box()
+            assert box is not None and panel is not None
+            assert box["x"] >= panel["x"] and box["x"] + box["width"] <= \
+                panel["x"] + panel["width"], (testid, box, panel)
+    finally:
+        page.close()
+
+
+def test_a_robot_with_no_autonomy_gets_one_line_not_a_page(page: Any) -> None:
+    card = page.get_by_test_id("autonomy")
+    sync_api.expect(page.get_by_test_id("autonomy-status")).to_contain_text("No autonomy view")
+    sync_api.expect(page.get_by_test_id("autonomy-map")).to_be_hidden()
+    sync_api.expect(page.get_by_test_id("autonomy-confidence")).to_be_hidden()
+    box = card.bounding_box()
+    assert box is not None and box["height"] < 120, box
+
+
+def test_the_battery_gauge_shows_the_robot_s_own_charge_and_interlocks_are_panel_state(
+        page: Any, mcp: McpClient) -> None:
+    charge = float(next(r.values[0] for r in mcp.request("base:base.get=()")
+                        if r.device == "battery" and r.prop == "charge"))
+    gauge = page.locator('[data-gauge="base:battery.volt"] .gauge-volts')
+    sync_api.expect(gauge).to_contain_text(f"· {charge:.0f} %", timeout=5000)
+    sync_api.expect(page.get_by_test_id("robot-interlocks")).not_to_have_text("")
+    # Nothing is wrong with a robot at rest: no alert and no banner.
+    sync_api.expect(page.get_by_test_id("alert")).to_have_count(0)
+    sync_api.expect(page.locator("#banner")).to_be_hidden()
+
+
+def test_an_active_interlock_is_an_alert_per_rule_an_events_line_and_panel_state(
+        page: Any, mcp: McpClient) -> None:
+    """A robot whose describe gives a rule no severity (`rule=(NAME)`) means `warning`: one
+    alert per rule with the rule's own advice, never "the lift's position" for any rule."""
+    assert mcp.request("sim:input.set=(ble,lift_pot,0.8)") == []
+    try:
+        alert = page.locator('[data-testid="alert"]'
+                             '[data-alert="interlock:chain_needs_ladder_down"]')
+        sync_api.expect(alert).to_be_visible(timeout=5000)
+        sync_api.expect(alert).to_have_attribute("data-severity", "warning")
+        sync_api.expect(alert).not_to_contain_text("lift's position")
+        sync_api.expect(page.get_by_test_id("robot-interlocks")).to_contain_text(
+            "chain_needs_ladder_down (warning)")
+        sync_api.expect(page.get_by_test_id("value:robot:interlock.active")).to_have_attribute(
+            "data-severity", "warning")
+        sync_api.expect(page.get_by_test_id("event").filter(
+            has_text="interlock chain_needs_ladder_down active (warning)")).to_have_count(1)
+    finally:
+        assert mcp.request("sim:input.clear=(ble,lift_pot)") == []
+    sync_api.expect(page.locator('[data-alert^="interlock:"]')).to_have_count(0, timeout=5000)
+    sync_api.expect(page.get_by_test_id("event").filter(
+        has_text="interlock chain_needs_ladder_down released")).to_have_count(1)

@@ -29,6 +29,7 @@ API_2_0 = {
     "EmulatorContext", "SimWorld", "ServoWorld",
     "Motor", "MOTOR_FIELDS", "Button", "BUTTON_FIELDS", "Voltage", "SystemVoltage",
     "BATTERY_FIELDS", "FILTER_FIELDS", "Led", "LoadCell", "LOAD_CELL_FIELDS", "FaultLatch", "mix",
+    "Charge",
 }
 
 

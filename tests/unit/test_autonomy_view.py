@@ -22,6 +22,8 @@ from ramp.autonomy.planning import Disc, Path, PlanResult
 from ramp.recorder.schemas import ChannelSpec
 from ramp.recorder.writer import TimeBase
 from ramp.statemachine import MissionContext, StateChange
+from ramp.statemachine.mission import LOCALIZATION
+from ramp.statemachine.table import STATES
 
 ORIGIN = 1_779_285_600_000_000_000  # 2026-05-20 14:00:00 UTC at clock time 10 s
 
@@ -58,16 +60,45 @@ def make_view(**kw: Any) -> tuple[AutonomyView, FakeSink, PoseTracker, MissionCo
     return AutonomyView(sink, tracker, ctx, **kw), sink, tracker, ctx
 
 
-def test_the_view_declares_its_five_channels_in_foxglove_schemas_where_foxglove_has_one(
+def test_the_view_declares_its_channels_in_foxglove_schemas_where_foxglove_has_one(
         ) -> None:
     _, sink, _, _ = make_view()
     assert {t: s.schema_name for t, s in sink.specs.items()} == {
         "/mission/state": "ramp.MissionState", "/pose/estimated": "foxglove.PoseInFrame",
         "/mission/numbers": "ramp.MissionNumbers", "/lidar/scan": "foxglove.LaserScan",
-        "/map": "foxglove.SceneUpdate"}
+        "/map": "foxglove.SceneUpdate", "/arena": "ramp.Arena",
+        "/obstacles": "ramp.Obstacles"}
     for spec in sink.specs.values():
         jsonschema.Draft202012Validator.check_schema(spec.schema)
-    assert set(LATCHED) == {"/map", "/mission/state"}
+    assert set(LATCHED) == {"/map", "/mission/state", "/arena", "/obstacles"}
+
+
+def test_the_state_schema_names_the_machine_s_own_states_and_localization_enum() -> None:
+    """Issue 35: the console kept its own copy of the recovery states' names."""
+    _, sink, _, _ = make_view()
+    props = sink.specs["/mission/state"].schema["properties"]
+    assert props["state"]["enum"] == [s.name for s in STATES]
+    assert props["localization"]["enum"] == list(LOCALIZATION)
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate({"state": "no_such_state", "from": "idle", "trigger": "start",
+                             "reason": "", "localization": "ok"},
+                            sink.specs["/mission/state"].schema)
+
+
+def test_obstacles_carry_their_kind_and_the_arena_its_size_as_typed_fields() -> None:
+    view, sink, _, ctx = make_view()
+    ctx.rocks.append(Disc(3.0, 1.0, 0.15))
+    ctx.craters.append(Disc(2.5, 3.0, 0.1))
+    view.tick(10.0, 0.1)
+    view.tick(10.1, 0.1)
+    (arena_msg,) = sink.on("/arena")  # once: it never changes
+    assert arena_msg == {"length_m": arena.ARENA_LENGTH_M, "width_m": arena.ARENA_WIDTH_M,
+                         "robot_length_m": arena.ROBOT_LENGTH_M,
+                         "robot_width_m": arena.ROBOT_WIDTH_M}
+    (obstacles,) = sink.on("/obstacles")
+    assert obstacles == {"obstacles": [
+        {"kind": "rock", "x": 3.0, "y": 1.0, "radius": 0.15},
+        {"kind": "crater", "x": 2.5, "y": 3.0, "radius": 0.1}]}
 
 
 def test_before_a_fix_it_sends_numbers_and_the_walls_but_no_pose() -> None:
@@ -128,10 +159,11 @@ def test_with_a_fix_it_sends_the_estimated_pose_at_10_hz_and_the_map_only_when_i
 
 def test_a_state_change_is_one_message_with_where_it_came_from_and_why() -> None:
     view, sink, _, _ = make_view()
-    view.state_changed(StateChange(12.5, "dock", "deposit", "finished", "docked at x 0.62"))
+    view.state_changed(StateChange(12.5, "dock", "deposit", "finished", "docked at x 0.62",
+                                   "ok"))
     assert sink.messages == [(12.5, "/mission/state", {
         "state": "deposit", "from": "dock", "trigger": "finished",
-        "reason": "docked at x 0.62"})]
+        "reason": "docked at x 0.62", "localization": "ok"})]
 
 
 def _scan(t: float) -> ScanRecord:

@@ -109,9 +109,12 @@ def test_get_rows_in_table_5_4_order() -> None:
     m, _ = build()
     rows = call(m, "base", "get")
     assert rows is not None
+    # Table 5.4's rows in its order, then the battery's charge (% from its YAML model, the
+    # fleet's batteryState) after them.
     assert [(r.device, r.prop) for r in rows] == [
         ("lf_wheel", "vel"), ("lb_wheel", "vel"), ("rf_wheel", "vel"), ("rb_wheel", "vel"),
-        ("l_button", "press"), ("r_button", "press"), ("battery", "volt"), ("user_led", "on")]
+        ("l_button", "press"), ("r_button", "press"), ("battery", "volt"), ("user_led", "on"),
+        ("battery", "charge")]
     assert all(r.module == "base" for r in rows)
     vals = [r.values[0] for r in rows]
     assert vals[:6] == [0, 0, 0, 0, 0, 0] and all(type(v) is int for v in vals[:6])

@@ -195,3 +195,30 @@ def test_ramp_check_of_an_empty_name_ends_with_a_line_that_names_no_file(
     assert cli.main(["check", name]) == 2
     err = capsys.readouterr().err.splitlines()
     assert err[-1] == "(no file name): 1 error"
+
+
+def _many_rocks(n: int) -> str:
+    rocks = "".join(f"  - {{x: {2 + (i % 300) / 100:.2f}, y: {1 + (i % 250) / 100:.2f}, "
+                    "d: 0.2}\n" for i in range(n))
+    return "start: {box: left, heading: 90}\nrocks:\n" + rocks
+
+
+def test_a_huge_file_without_aliases_says_which_limit_it_hit_and_says_it_quickly(
+        tmp_path: Path) -> None:
+    """Issue 35: a 12,000-rock world file was refused as "an alias bomb?" after 7.5 s."""
+    import time
+
+    from firmware_like.world_file import WorldFileError, load_world
+
+    path = tmp_path / "world.yaml"
+    path.write_text(_many_rocks(12_000))
+    t0 = time.perf_counter()
+    with pytest.raises(WorldFileError) as info:
+        load_world(path)
+    elapsed = time.perf_counter() - t0
+    text = str(info.value)
+    assert "alias bomb" not in text and "more than 50000 values" in text, text
+    assert f"{path}:" in text and "limit" in text
+    assert elapsed < 1.5, elapsed  # 0.1 s here; was 5-7 s (noisy: the machine is shared)
+    # A world of a thousand rocks is well inside the limit.
+    assert parse(_many_rocks(1000))["rocks"][999]["d"] == 0.2

@@ -239,6 +239,17 @@ def test_the_site_builds_strictly(tmp_path: Path) -> None:
         assert html.is_file(), f"{name(page)} was not built"
     api = (site / "extending" / "api" / "index.html").read_text(encoding="utf-8")
     assert "McpClient" in api and "parse_response_line" in api, "the API reference is empty"
+    # Offline: the diagrams' script is served with the site (with its licence), so the
+    # theme never fetches it from a CDN (issue 35); no page loads a script from the network.
+    vendored = site / "assets" / "vendor" / "mermaid"
+    assert (vendored / "mermaid.min.js").stat().st_size > 1_000_000
+    assert "MIT License" in (vendored / "LICENSE").read_text(encoding="utf-8")
+    machine = (site / "autonomy" / "state-machine" / "index.html").read_text(encoding="utf-8")
+    assert 'class="mermaid"' in machine
+    assert re.search(r'<script src="[./]*assets/vendor/mermaid/mermaid\.min\.js"', machine)
+    for html in site.rglob("*.html"):
+        text = html.read_text(encoding="utf-8")
+        assert not re.search(r'<script[^>]+src="(?:https?:)?//', text), html
 
 
 def test_the_api_page_documents_a_module_once_it_is_in_the_tree(tmp_path: Path) -> None:
@@ -253,3 +264,25 @@ def test_the_api_page_documents_a_module_once_it_is_in_the_tree(tmp_path: Path) 
     assert "::: ramp.api\n" in hook.api_markdown(page, tmp_path)
     # The real page carries the marker, so the reference appears when ramp/api.py lands.
     assert "<!-- api: ramp.api -->" in (DOCS / "extending" / "api.md").read_text()
+
+
+def test_code_points_at_the_docs_page_holding_a_text_not_at_the_readme() -> None:
+    """Issue 35: comments said "see the README" for text that had moved to docs/ pages."""
+    stale = [f"{path.relative_to(REPO)}:{n}" for top in ("ramp", "firmware_like", "bench")
+             for path in sorted((REPO / top).rglob("*.py"))
+             for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+             if "README" in line]
+    assert stale == [], stale
+    for page in ("docs/autonomy/state-machine.md", "docs/operating/mcp.md",
+                 "docs/operating/configuration.md"):
+        assert (REPO / page).is_file(), page
+
+
+def test_the_readme_s_simulated_robots_listen_on_loopback_only() -> None:
+    """Issue 35: the README's Scout command served on every interface (scout.yaml's server
+    host is the real rover's 0.0.0.0): a simulated robot a reader starts is theirs alone."""
+    runs = [line for line in (REPO / "README.md").read_text(encoding="utf-8").splitlines()
+            if re.match(r"\s*(\.venv/bin/)?ramp run ", line)]
+    assert runs, "the README shows no ramp run command"
+    for line in runs:
+        assert "--host 127.0.0.1" in line, line

@@ -5,6 +5,7 @@ two clients, two owners, one watchdog trip, one fault, two overruns, the Base mo
 from __future__ import annotations
 
 import json
+import subprocess
 import sys
 from pathlib import Path
 
@@ -186,3 +187,35 @@ def test_plot_without_matplotlib_says_what_to_install(
     monkeypatch.setitem(sys.modules, "tqdm", None)
     assert main(["summary", str(recording), "--progress"]) == 0  # no bar, same summary
     assert "watchdog   1 trip" in capsys.readouterr().out
+
+
+def _crafted(tmp_path: Path) -> Path:
+    """A recording whose log and event texts carry terminal escapes (ESC, BEL)."""
+    rec = Recorder(RecorderConfig(str(tmp_path)), origin_ns=ORIGIN)
+    rec.start(100.0)
+    for k in range(3):
+        rec.health(100.0 + k, health(float(k), "idle", "none", 0, "ok"))
+    rec.event(101.0, "control", "owner \x1b]0;pwned\x07 \x1b[2J")
+    rec.log(101.0, 4, "bad \x1b[31mred\x1b[0m \x07 bell", "ramp.supervisor", "x", 1)
+    rec.close()
+    return recording_files(tmp_path)[0][1]
+
+
+def test_summary_shows_control_characters_escaped_never_raw(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = _crafted(tmp_path)
+    assert main(["summary", str(path)]) == 0
+    text = capsys.readouterr().out
+    assert "\x1b" not in text and "\x07" not in text
+    assert "\\x1b" in text and "\\x07" in text, text
+
+
+def test_summary_into_a_reader_that_stops_early_ends_quietly(tmp_path: Path) -> None:
+    path = _crafted(tmp_path)
+    # `head -n 0` exits before Python has started: the first write finds the pipe closed,
+    # as a `| head` does after its lines in a longer summary.
+    proc = subprocess.run(f"{sys.executable} -m ramp.cli log summary {path} | head -n 0",
+                          shell=True, capture_output=True, text=True, timeout=120,
+                          cwd=Path(__file__).resolve().parents[2])
+    assert proc.stdout == ""
+    assert "Traceback" not in proc.stderr and "BrokenPipe" not in proc.stderr, proc.stderr

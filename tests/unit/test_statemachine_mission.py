@@ -9,6 +9,7 @@ import logging
 import pytest
 
 from ramp.statemachine import Executive, Mission, MissionError, Status
+from ramp.statemachine.mission import LOCALIZATION
 from ramp.statemachine.table import DRIVING
 from tests.unit.mission_world import Run, Script, make_run
 
@@ -143,6 +144,26 @@ def test_a_lost_pose_while_crossing_stops_relevels_rescans_relocalizes_and_plans
     assert run.mission.context.localization_losses == 1
     assert run.mission.context.deposits >= 1
     _never_drove_while_lost(run)
+
+
+def test_each_change_says_the_localization_from_the_machine_s_own_bookkeeping() -> None:
+    """Issue 35: the console read "lost" from a reason's wording; the change carries it."""
+    run = make_run(Script(lose_pose_at=(12.0,))).run(150)
+    by_dest = [(c.dest, c.localization) for c in run.changes]
+    assert by_dest[0] == ("acquire_control", "none")
+    assert ("prepare_for_scan", "ok") in by_dest
+    i = by_dest.index(("stop", "lost"))
+    assert by_dest[i + 1:i + 4] == [("relevel", "lost"), ("rescan", "lost"),
+                                    ("relocalize", "lost")]
+    assert by_dest[i + 4] == ("resume", "ok")
+    assert all(loc in LOCALIZATION for _, loc in by_dest)
+
+
+def test_relocalizing_after_a_takeover_is_not_being_lost() -> None:
+    run = make_run(Script(takeovers=((30.0, 50.0),))).run(120.0)
+    after = [(c.dest, c.localization) for c in run.changes if c.t >= 50.0][:5]
+    assert after[1:4] == [("relevel", "relocalizing"), ("rescan", "relocalizing"),
+                          ("relocalize", "relocalizing")], after
 
 
 def test_it_never_enters_a_driving_state_without_a_confident_pose() -> None:

@@ -51,9 +51,27 @@ def test_the_map_gives_walls_regions_collector_obstacles_plan_and_footprint() ->
         arena_entity(WHEN)]}
     m = map_view(scene)
     assert m["walls"] == [(0, 0), (7.38, 0)] and m["plan"] == [[(1, 1), (2, 1)]]
-    assert m["rocks"] == [[3, 1, 0.15]] and m["craters"] == [[2.5, 3, 0.1]]
     assert len(m["regions"]) == 3 and len(m["collector"]) == 1
     assert m["robot"] == [1.2, 0.75]
+
+
+def test_obstacles_and_the_arena_s_size_are_read_from_typed_fields_not_colours() -> None:
+    """Issue 35: a rock was told from a crater by its colour; now by `kind` (`/obstacles`),
+    and the arena's size is the view's `/arena`, not a constant in the page."""
+    link = AutonomyLink("127.0.0.1", 9)
+    link._take("/obstacles", {"obstacles": [
+        {"kind": "crater", "x": 3, "y": 1, "radius": 0.15},
+        {"kind": "rock", "x": 2.5, "y": 3, "radius": 0.1}]}, 0, 0.0)
+    link._take("/arena", {"length_m": 9.0, "width_m": 5.0, "robot_length_m": 1.0,
+                          "robot_width_m": 0.5}, 0, 0.0)
+    # A later map keeps what the typed channels said.
+    link._take("/map", {"entities": [arena_entity(WHEN)]}, 0, 0.0)
+    m = link.view.map
+    assert m["obstacles"] == [{"kind": "crater", "x": 3.0, "y": 1.0, "radius": 0.15},
+                              {"kind": "rock", "x": 2.5, "y": 3.0, "radius": 0.1}]
+    assert m["arena"] == {"length_m": 9.0, "width_m": 5.0, "robot_length_m": 1.0,
+                          "robot_width_m": 0.5}
+    assert m["robot"] == [1.0, 0.5]
 
 
 def test_it_takes_poses_at_its_own_rate_and_state_and_map_as_they_change() -> None:
@@ -101,15 +119,13 @@ def test_it_takes_poses_at_its_own_rate_and_state_and_map_as_they_change() -> No
     assert link.bytes_in > 0 and link.bytes_out > 0
 
 
-def test_lost_holds_from_a_lost_stop_until_a_working_state() -> None:
+def test_localization_is_the_view_s_enum_not_a_reading_of_names_or_reasons() -> None:
     link = AutonomyLink("127.0.0.1", 9)
-    for state, trigger, reason, lost in (
-            ("relevel", "finished", "control acquired as autonomy", False),
-            ("stop", "lost", "too few returns to localize", True),
-            ("relevel", "finished", "standing still", True),
-            ("relocalize", "finished", "10 level scans", True),
-            ("resume", "finished", "localized", True),
-            ("cross_to_dig", "dispatch", "resume cross_to_dig", False)):
-        link._take("/mission/state", {"state": state, "from": "", "trigger": trigger,
-                                      "reason": reason}, 0, 0.0)
-        assert link.view.lost is lost, state
+    for state, reason, localization in (
+            ("relevel", "control acquired as autonomy", "relocalizing"),
+            ("stop", "lost: too few returns to localize", "lost"),
+            ("cross_to_dig", "lost count 3 is fine", "ok")):
+        link._take("/mission/state", {"state": state, "from": "", "trigger": "finished",
+                                      "reason": reason, "localization": localization}, 0, 0.0)
+        assert link.view.localization == localization, state
+        assert link.view.summary(0.0)["localization"] == localization

@@ -92,3 +92,62 @@ def test_the_console_never_imports_the_backend() -> None:
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             timeout=60)
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def _console_with(describe: list[str]) -> tuple[object, list[dict[str, object]]]:
+    from types import SimpleNamespace
+
+    from ramp.mcp.describe import build_catalog
+    from ramp.mcp.protocol import parse_response_line
+    from ramp.teleop.console import Console
+    from ramp.teleop.profile import DEFAULT_PROFILE, ProfileLibrary
+
+    library = ProfileLibrary()
+    console = Console("127.0.0.1", 9, name="op", library=library,
+                      profile=library.load(DEFAULT_PROFILE))
+    console._loop = SimpleNamespace(time=lambda: 1.0)  # type: ignore[assignment]
+    got: list[dict[str, object]] = []
+    console.pages["1"] = got.append
+    rows = [r for line in describe for r in parse_response_line(line.encode())]
+    console.poller.catalog = build_catalog(
+        [r for r in rows if r.module == "robot"],
+        {m: [r for r in rows if r.module == m] for m in {r.module for r in rows} - {"robot"}})
+    return console, got
+
+
+def test_an_info_interlock_is_an_events_line_and_no_alert_a_warning_one_is_an_alert() -> None:
+    """Issue 35: MARTE's digging_creep was a banner for the whole of every dig."""
+    from ramp.teleop.robot import Status
+
+    console, got = _console_with([
+        "robot:robot.module=(base)", "robot:interlock.rule=(digging_creep,info)",
+        "robot:interlock.rule=(bumper,error)",
+        "robot:interlock.message=(bumper,Back away from what the bumper touches)"])
+    status = Status(reachable=True, polls=1,
+                    values={"robot:interlock.active": "digging_creep"})
+    console.poller.status = status
+    console._on_status(status)  # type: ignore[attr-defined]
+    events = [m["text"] for m in got if m["type"] == "event"]
+    assert events == ["interlock digging_creep active (info)"]
+    assert console.alerts.alerts == []  # type: ignore[attr-defined]
+    status.values["robot:interlock.active"] = "none"
+    console._on_status(status)  # type: ignore[attr-defined]
+    assert [m["text"] for m in got if m["type"] == "event"][-1] == \
+        "interlock digging_creep released (info)"
+    status.values["robot:interlock.active"] = "bumper"
+    console._on_status(status)  # type: ignore[attr-defined]
+    (alert,) = console.alerts.view()  # type: ignore[attr-defined]
+    assert alert["severity"] == "error" and alert["takeover"]
+    assert alert["text"].startswith("Back away from what the bumper touches.")
+    catalog = console.catalog_message()  # type: ignore[attr-defined]
+    assert catalog["interlocks"]["digging_creep"] == {"severity": "info", "message": ""}
+
+
+def test_the_low_battery_alert_reads_the_robot_s_charge_where_it_gives_one() -> None:
+    from ramp.teleop.console import battery_keys
+
+    console, _ = _console_with([
+        "robot:robot.module=(base)", "base:battery.property=(volt,float,V)",
+        "base:battery.property=(charge,float,%)", "base:aux.property=(volt,float,V)"])
+    assert battery_keys(console.poller.catalog) == (  # type: ignore[attr-defined]
+        "base:battery.charge", "base:aux.volt")

@@ -14,6 +14,12 @@ planned); the simulator's truth (`/pose/true`, `true_*` numbers) is added by the
 | `/mission/numbers` | `ramp.MissionNumbers` | 0.1 s: pose confidence, bin load, delivered, lift |
 | `/lidar/scan` | `foxglove.LaserScan` | each scan the autonomy took, at the estimated pose |
 | `/map` | `foxglove.SceneUpdate` | when the map changes: walls, detected obstacles, the plan |
+| `/obstacles` | `ramp.Obstacles` | with `/map`: each detected obstacle with its `kind` |
+| `/arena` | `ramp.Arena` | once: the arena's and the robot's dimensions |
+
+Typed fields, not pictures: a viewer reads an obstacle's `kind`, the `localization` enum of
+`/mission/state` and the arena's size from `/arena`, never a colour or a wording; the state
+names in `ramp.MissionState`'s schema are the mission table's own (`enum`).
 
 `/map` holds two entities: `mission` (the walls, then the plan's legs; the detected rocks and
 craters as cylinders) and `arena` (the regions' borders and the collector, in the order its
@@ -39,6 +45,9 @@ import numpy as np
 from ramp.autonomy import arena
 from ramp.autonomy.mount import rotation_zyx
 from ramp.recorder.schemas import ChannelSpec
+from ramp.statemachine.mission import LOCALIZATION
+from ramp.statemachine.table import STATES as MISSION_STATES
+from ramp.statemachine.table import TRIGGERS
 
 if TYPE_CHECKING:
     from ramp.autonomy.executive.autonomy import Autonomy
@@ -103,11 +112,38 @@ SCENE_UPDATE = {
                                    "colors": {"type": "array", "items": _COLOR},
                                    "indices": {"type": "array",
                                                "items": {"type": "integer"}}}}}}}}}}
+#: The mission's states, as the machine's own table names them (never a copy).
+STATE_NAMES = [spec.name for spec in MISSION_STATES]
 MISSION_STATE = {"title": "ramp.MissionState", "type": "object",
                  "description": "The mission machine's state change (SPEC 6.3)",
-                 "properties": {"state": {"type": "string"}, "from": {"type": "string"},
-                                "trigger": {"type": "string"}, "reason": {"type": "string"}},
-                 "required": ["state", "from", "trigger", "reason"]}
+                 "properties": {"state": {"type": "string", "enum": STATE_NAMES},
+                                "from": {"type": "string", "enum": STATE_NAMES},
+                                "trigger": {"type": "string", "enum": list(TRIGGERS)},
+                                "reason": {"type": "string"},
+                                "localization": {
+                                    "type": "string", "enum": list(LOCALIZATION),
+                                    "description": "none: no fix yet; ok; lost: a loss not "
+                                                   "recovered from; relocalizing: after a "
+                                                   "hand-back"}},
+                 "required": ["state", "from", "trigger", "reason", "localization"]}
+#: The arena's fixed dimensions (SPEC 6.1), for a viewer with no copy of them.
+ARENA = {"title": "ramp.Arena", "type": "object",
+         "description": "The arena and the robot's footprint, metres, frame arena",
+         "properties": {k: {"type": "number", "exclusiveMinimum": 0} for k in (
+             "length_m", "width_m", "robot_length_m", "robot_width_m")},
+         "required": ["length_m", "width_m", "robot_length_m", "robot_width_m"]}
+OBSTACLE_KINDS = ["rock", "crater"]
+#: The obstacles the autonomy detected, each with its kind (the map's cylinders only colour
+#: them).
+OBSTACLES = {"title": "ramp.Obstacles", "type": "object",
+             "description": "Detected obstacles, frame arena",
+             "properties": {"obstacles": {"type": "array", "items": {
+                 "type": "object", "title": "ramp.Obstacle",
+                 "properties": {"kind": {"type": "string", "enum": OBSTACLE_KINDS},
+                                "x": {"type": "number"}, "y": {"type": "number"},
+                                "radius": {"type": "number", "minimum": 0}},
+                 "required": ["kind", "x", "y", "radius"]}}},
+             "required": ["obstacles"]}
 #: The autonomy's numbers; a simulation adds the truth beside them (`true_*`).
 MISSION_NUMBERS = {"title": "ramp.MissionNumbers", "type": "object",
                    "description": "What the mission believes and what is true, 10 Hz",
@@ -120,9 +156,11 @@ POSE_ESTIMATED = ChannelSpec("/pose/estimated", "foxglove.PoseInFrame", POSE_IN_
 NUMBERS = ChannelSpec("/mission/numbers", "ramp.MissionNumbers", MISSION_NUMBERS)
 SCAN = ChannelSpec("/lidar/scan", "foxglove.LaserScan", LASER_SCAN)
 MAP = ChannelSpec("/map", "foxglove.SceneUpdate", SCENE_UPDATE)
-CHANNELS = (STATE, POSE_ESTIMATED, NUMBERS, SCAN, MAP)
+ARENA_CHANNEL = ChannelSpec("/arena", "ramp.Arena", ARENA)
+OBSTACLES_CHANNEL = ChannelSpec("/obstacles", "ramp.Obstacles", OBSTACLES)
+CHANNELS = (STATE, POSE_ESTIMATED, NUMBERS, SCAN, MAP, ARENA_CHANNEL, OBSTACLES_CHANNEL)
 #: Topics a live view keeps the last message of, for a client that subscribes later.
-LATCHED = (MAP.topic, STATE.topic)
+LATCHED = (MAP.topic, STATE.topic, ARENA_CHANNEL.topic, OBSTACLES_CHANNEL.topic)
 
 
 class ChannelSink(Protocol):
@@ -249,6 +287,21 @@ def arena_entity(when: dict[str, int]) -> dict[str, Any]:
     return _entity(when, "arena", lines, [], meta)
 
 
+def arena_message() -> dict[str, float]:
+    """`ramp.Arena`: the arena's and the robot's sizes (`ramp.autonomy.arena`)."""
+    return {"length_m": arena.ARENA_LENGTH_M, "width_m": arena.ARENA_WIDTH_M,
+            "robot_length_m": arena.ROBOT_LENGTH_M, "robot_width_m": arena.ROBOT_WIDTH_M}
+
+
+def obstacles_message(context: MissionContext) -> dict[str, Any]:
+    """`ramp.Obstacles`: every detected rock and crater with its kind."""
+    return {"obstacles": [{"kind": kind, "x": round(d.x, 3), "y": round(d.y, 3),
+                           "radius": round(d.radius, 3)}
+                          for kind, discs in (("rock", context.rocks),
+                                              ("crater", context.craters))
+                          for d in discs]}
+
+
 def scan_message(when: dict[str, int], record: ScanRecord, pose: Pose) -> dict[str, Any]:
     """A scan as a `foxglove.LaserScan` placed in the arena at the estimated pose (with the
     chassis' roll and pitch the AHRS gave it): what the autonomy believes it saw."""
@@ -282,6 +335,7 @@ class AutonomyView:
         self.lift = lift
         self.active = True
         self._map_key: tuple[int, int] = (-1, -1)
+        self._arena_sent = False
         self._unwatch: Callable[[], None] | None = None
         for spec in CHANNELS:
             sink.add_channel(spec)
@@ -312,7 +366,7 @@ class AutonomyView:
         if self.active:
             self.sink.publish(change.t, STATE.topic, {
                 "state": change.dest, "from": change.source, "trigger": change.trigger,
-                "reason": change.reason})
+                "reason": change.reason, "localization": change.localization or "none"})
 
     def tick(self, now: float, dt: float) -> None:
         """Scheduler task at `VIEW_HZ`."""
@@ -337,10 +391,14 @@ class AutonomyView:
         if truth:
             numbers.update(truth)
         self.sink.publish(now, NUMBERS.topic, numbers)
+        if not self._arena_sent:
+            self._arena_sent = True
+            self.sink.publish(now, ARENA_CHANNEL.topic, arena_message())
         key = (len(self.planned), len(ctx.rocks) + len(ctx.craters))
         if key != self._map_key:
             self._map_key = key
             self.sink.publish(now, MAP.topic, scene_message(when, ctx))
+            self.sink.publish(now, OBSTACLES_CHANNEL.topic, obstacles_message(ctx))
 
     def scan(self, record: ScanRecord) -> None:
         """The perception's scan listener: the scan at the pose estimated now (none while

@@ -13,13 +13,16 @@ from collections.abc import Mapping
 from typing import Any
 
 from ramp.hal.interfaces import AnalogInput
+from ramp.layers.functional.battery import MODEL_FIELDS, MODEL_RULES
 from ramp.schema import Block, Field
 
-#: YAML keys of the battery device (defaults: the 1135's fixed conversion).
+#: YAML keys of the battery device (defaults: the 1135's fixed conversion), and the pack's
+#: model for its charge (`ramp.layers.functional.battery`).
 BATTERY_FIELDS = Block({
     "offset": Field(float, 2.5, -10.0, 10.0, what="the pin voltage at 0 V on the rail"),
     "scale": Field(float, 0.0681, 0.001, 10.0, what="pin volts per rail volt"),
-})
+    **MODEL_FIELDS,
+}, MODEL_RULES)
 
 #: Settings block `battery_filter`: the low-pass time constant in seconds.
 FILTER_FIELDS = Block({

@@ -27,6 +27,7 @@
     autonomy: null, // the last "autonomy" summary
     map: {},
     scan: [],
+    interlocks: {}, // rule name -> {severity, message}, from the robot's describe
   };
 
   // ---- helpers --------------------------------------------------------------------------
@@ -91,7 +92,7 @@
   function handle(msg) {
     switch (msg.type) {
       case "hello": onHello(msg); break;
-      case "catalog": renderModules(msg.modules || []); break;
+      case "catalog": st.interlocks = msg.interlocks || {}; renderModules(msg.modules || []); break;
       case "status": onStatus(msg); break;
       case "drive": st.drive = msg; refreshDrive(); break;
       case "result": onResult(msg); break;
@@ -118,8 +119,10 @@
         + "(ramp-autonomy --foxglove-port). Teleoperation works as usual.";
       $("autonomy-state").textContent = "no autonomy";
       $("autonomy-map").classList.add("hidden");
+      $("autonomy-card").classList.add("compact"); // one line, not a page of empty fields
     } else {
       $("autonomy-map").classList.remove("hidden");
+      $("autonomy-card").classList.remove("compact");
     }
   }
 
@@ -137,8 +140,11 @@
     const stateEl = $("autonomy-state");
     const since = msg.in_state_s != null ? ` · ${formatAge(msg.in_state_s)}` : "";
     stateEl.textContent = msg.state ? `${msg.state}${since}` : (msg.connected ? "waiting for the mission" : "–");
-    const bad = msg.state === "waiting_for_operator" || ["relevel", "rescan", "relocalize"].includes(msg.state);
-    setState(stateEl, bad ? "bad" : msg.state === "paused" || msg.state === "stop" ? "warn" : "", ["bad", "warn"]);
+    // The localization is the view's enum (none, ok, lost, relocalizing), not a list of names.
+    const bad = msg.state === "waiting_for_operator" || msg.localization === "lost";
+    const warn = msg.state === "paused" || msg.localization === "relocalizing";
+    setState(stateEl, bad ? "bad" : warn ? "warn" : "", ["bad", "warn"]);
+    $("autonomy-localization").textContent = msg.localization || "–";
     $("autonomy-reason").textContent = msg.reason || "";
     const n = msg.numbers || {};
     const conf = $("autonomy-confidence");
@@ -164,7 +170,11 @@
     const g = c.getContext("2d");
     const W = c.width, H = c.height, m = st.map || {};
     g.clearRect(0, 0, W, H);
-    const L = 7.38, Wd = 3.88, pad = 16, back = 0.35;
+    // The arena's size as the autonomy publishes it (/arena); the walls until it has come.
+    const size = m.arena || {};
+    const xs = (m.walls || []).map((p) => p[0]), ys = (m.walls || []).map((p) => p[1]);
+    const L = size.length_m || (xs.length ? Math.max(...xs) : 1), Wd = size.width_m || (ys.length ? Math.max(...ys) : 1);
+    const pad = 16, back = 0.35;
     const k = Math.min((W - 2 * pad) / (L + back), (H - 2 * pad) / Wd);
     const X = (x) => pad + (x + back) * k, Y = (y) => H - pad - y * k;
     const line = (pts, colour, width, dash) => {
@@ -179,8 +189,10 @@
     line(m.walls && m.walls.length ? m.walls : [[0, 0], [L, 0], [L, Wd], [0, Wd], [0, 0]], "#c8ccd4", 3);
     for (const r of m.regions || []) line(r, "#6c7480", 1, [6, 5]);
     for (const r of m.collector || []) line(r, "#f0c020", 3);
-    for (const d of m.craters || []) disc(d, "rgba(68,102,221,.75)");
-    for (const d of m.rocks || []) disc(d, "rgba(229,56,59,.8)");
+    const OBSTACLE_COLOURS = { rock: "rgba(229,56,59,.8)", crater: "rgba(68,102,221,.75)" };
+    for (const o of m.obstacles || []) {
+      disc([o.x, o.y, o.radius], OBSTACLE_COLOURS[o.kind] || "rgba(160,160,160,.8)");
+    }
     for (const leg of m.plan || []) line(leg, "#2fb062", 2);
     g.fillStyle = "#f0a020";
     for (const [x, y] of st.scan || []) g.fillRect(X(x) - 1.5, Y(y) - 1.5, 3, 3);
@@ -204,7 +216,7 @@
       footprint(a.pose, "#3d8bfd", null, "rgba(61,139,253,.25)");
     }
     if (!a || !a.connected) {
-      g.fillStyle = "#8b94a3"; g.font = "14px system-ui"; g.fillText("no autonomy view", X(3), Y(Wd / 2));
+      g.fillStyle = "#8b94a3"; g.font = "14px system-ui"; g.fillText("no autonomy view", X(L * 0.4), Y(Wd / 2));
     }
   }
 
@@ -393,6 +405,15 @@
       const e = st.values.get(key);
       if (e && e.textContent !== text) e.textContent = text;
     }
+    // The robot panel's active interlocks carry each rule's severity (the text stays the value).
+    const active = st.values.get("robot:interlock.active");
+    if (active) {
+      const names = (active.textContent || "").split(",").filter((n) => n && n !== "none");
+      const sev = (n) => (st.interlocks[n] && st.interlocks[n].severity) || "warning";
+      active.title = names.map((n) => `${n}: ${sev(n)}${st.interlocks[n] && st.interlocks[n].message ? " — " + st.interlocks[n].message : ""}`).join("\n");
+      active.dataset.severity = names.some((n) => sev(n) === "error") ? "error"
+        : names.some((n) => sev(n) === "warning") ? "warning" : names.length ? "info" : "";
+    }
     for (const m of st.modules) {
       if (m.name === "robot") continue;
       const s = (msg.states || {})[m.name] || m.state || "unknown";
@@ -455,20 +476,29 @@
     const owner = v("robot:control.owner");
     fact(dl, "control owner", owner ?? "–", owner && owner !== "none" ? "warn" : "");
     fact(dl, "clients", v("robot:clients.count") ?? "–");
+    // Interlocks, with the severity the robot gives each rule: an info rule (normal work,
+    // such as digging_creep) is state here and a line in Events, never an alert.
+    const active = (v("robot:interlock.active") || "none").split(",").filter((n) => n && n !== "none");
+    const sev = (n) => (st.interlocks[n] && st.interlocks[n].severity) || "warning";
+    const worst = active.some((n) => sev(n) === "error") ? "bad" : active.some((n) => sev(n) === "warning") ? "warn" : active.length ? "drive" : "ok";
+    fact(dl, "interlocks", active.length ? active.map((n) => `${n} (${sev(n)})`).join(", ") : "none", worst);
+    dl.lastChild.setAttribute("data-testid", "robot-interlocks");
     const states = (st.status && st.status.states) || {};
     for (const [m, s] of Object.entries(states)) {
       fact(dl, `module ${m}`, s, s === "ok" ? "ok" : s === "fault" ? "bad" : "warn");
     }
   }
 
-  // Every property the robot reports in volts gets a gauge.
+  // Every property the robot reports in volts gets a gauge; its charge is the device's own
+  // `charge` row in % (the robot's battery model) where it has one.
   function renderBatteries() {
     const box = $("batteries");
     const gauges = [];
     for (const m of st.modules) for (const d of m.devices) for (const p of d.properties) {
       if (p.unit === "V") {
         const key = `${m.name}:${d.name}.${p.name}`;
-        gauges.push(el("div", { class: "gauge", "data-gauge": key },
+        const charge = d.properties.find((q) => q.unit === "%" && q.name === "charge");
+        gauges.push(el("div", { class: "gauge", "data-gauge": key, "data-charge": charge ? `${m.name}:${d.name}.charge` : null },
           el("div", { class: "gauge-label" }, el("span", { text: `${m.name} ${d.name}` }),
             el("span", { class: "gauge-volts" })),
           el("div", { class: "gauge-bar" }, el("div", { class: "gauge-fill", style: "width:0%" }))));
@@ -483,7 +513,9 @@
       const volts = Number(text);
       const fill = g.querySelector(".gauge-fill");
       if (text === undefined || !Number.isFinite(volts)) { g.querySelector(".gauge-volts").textContent = "–"; return; }
-      const pct = Math.max(0, Math.min(100, (100 * (volts - empty)) / (full - empty)));
+      const charge = g.dataset.charge ? Number(value(g.dataset.charge)) : NaN;
+      const pct = Number.isFinite(charge) ? Math.max(0, Math.min(100, charge))
+        : Math.max(0, Math.min(100, (100 * (volts - empty)) / (full - empty)));
       g.querySelector(".gauge-volts").textContent = `${volts.toFixed(2)} V · ${pct.toFixed(0)} %`;
       fill.style.width = `${pct}%`;
       setState(fill, pct < 20 ? "bad" : pct < 50 ? "warn" : "", ["bad", "warn"]);
@@ -507,14 +539,9 @@
   function refreshBanner() {
     const b = $("banner");
     let text = "", cls = "";
-    const s = st.status;
     if (!st.connected) { text = "CONSOLE DISCONNECTED: ramp-teleop is not reachable. The robot stops by itself (watchdog)."; cls = "bad"; }
-    else if (s && !s.reachable) { text = `ROBOT LINK LOST (${s.detail}). Reconnecting; motion will not resume by itself.`; cls = "bad"; }
-    else if (s) {
-      const faults = Object.entries(s.states || {}).filter(([, v]) => v === "fault").map(([m]) => m);
-      if (faults.length) { text = `MODULE FAULT: ${faults.join(", ")}; its motion is stopped.`; cls = "bad"; }
-      else if (value("robot:watchdog.state") === "tripped") { text = "WATCHDOG TRIPPED: every module stopped. Motion resumes only on a new command."; cls = "warn"; }
-    }
+    // The robot's link, faults and watchdog are alerts (one place, with what to do); the
+    // banner is only for what no alert can say: the console itself is gone.
     b.textContent = text;
     b.className = `banner ${cls}${text ? "" : " hidden"}`;
   }
