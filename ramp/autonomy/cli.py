@@ -31,12 +31,17 @@ from __future__ import annotations
 import argparse
 import logging
 import signal
+import ssl
 import sys
 from collections.abc import Sequence
 from types import FrameType
 from urllib.parse import urlsplit
 
 from ramp.autonomy.config import AutonomyConfig, check_config, parse_address, tunable_notes
+from ramp.autonomy.executive.autonomy import OWNER
+from ramp.autonomy.live.foxglove_live import add_host_arguments as add_foxglove_host_arguments
+from ramp.autonomy.live.foxglove_live import server_tls
+from ramp.common.endpoint import add_tls_arguments, certificate_name, context_for, split_scheme
 from ramp.common.hostport import format_hostport
 
 DEFAULT_CONFIG = "autonomy.yaml"
@@ -87,7 +92,10 @@ def build_parser() -> argparse.ArgumentParser:
               "[--start-box left|right] [--foxglove-port P]\n"
               "       ramp-autonomy check FILE")
     parser.add_argument("--backend", metavar="HOST:PORT",
-                        help="the backend's MCP address (default: the config's backend)")
+                        help="the backend's MCP address (default: the config's backend); "
+                             "mcps://HOST:PORT for mutual TLS with --cert/--key/--ca or "
+                             "--identity (a certificate named autonomy)")
+    add_tls_arguments(parser, "the backend")
     parser.add_argument("--config", default=DEFAULT_CONFIG, metavar="FILE",
                         help=f"the autonomy's config (default {DEFAULT_CONFIG})")
     parser.add_argument("--start-box", choices=("left", "right"), default=None,
@@ -97,6 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="stream the autonomy's view live to Foxglove (WebSocket, "
                              "foxglove.websocket.v1) on 127.0.0.1:P; 0 picks a free port, "
                              "printed (needs the `foxglove` extra)")
+    add_foxglove_host_arguments(parser)
     parser.add_argument("--command-port", type=int, default=None, metavar="P",
                         help="serve the command endpoint for the fleet agent on 127.0.0.1:P "
                              "(0 picks one; SPEC 14): the mission then waits for the "
@@ -147,10 +156,22 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"ramp-autonomy: {len(errors)} error(s) in {args.config}", file=sys.stderr)
         return 2
     try:
-        backend = parse_address(args.backend) if args.backend else (cfg.backend_host,
-                                                                     cfg.backend_port)
+        tls, address = split_scheme(args.backend or "")
+        backend = parse_address(address) if address else (cfg.backend_host, cfg.backend_port)
+        backend_tls = context_for(tls, args)
+        if backend_tls is not None:
+            named = certificate_name(args.cert or args.identity)
+            if named != OWNER:  # over TLS control is acquired under one's own identity
+                raise ValueError(f"the autonomy acquires control as {OWNER!r}, so its "
+                                 f"certificate's name must be {OWNER!r}, not {named!r}: "
+                                 f"`ramp certs issue DIR {OWNER} --role operator`")
     except ValueError as exc:
         print(f"ramp-autonomy: --backend: {exc}", file=sys.stderr)
+        return 2
+    try:
+        foxglove_tls = server_tls(args.foxglove_cert, args.foxglove_key)
+    except ValueError as exc:
+        print(f"ramp-autonomy: {exc}", file=sys.stderr)
         return 2
     port = args.foxglove_port
     if port is not None and not 0 <= port <= 65535:
@@ -171,13 +192,17 @@ def cmd_run(args: argparse.Namespace) -> int:
         return 2
     return run_on_robot(cfg, backend, start_box=args.start_box, foxglove_port=port,
                         foxglove_origins=args.foxglove_origin,
-                        command_port=args.command_port)
+                        command_port=args.command_port, backend_tls=backend_tls,
+                        foxglove_host=args.foxglove_host, foxglove_tls=foxglove_tls)
 
 
 def run_on_robot(cfg: AutonomyConfig, backend: tuple[str, int], *,
                  start_box: str | None = None, foxglove_port: int | None = None,
                  foxglove_origins: Sequence[str] = (),
-                 command_port: int | None = None) -> int:
+                 command_port: int | None = None,
+                 backend_tls: ssl.SSLContext | None = None,
+                 foxglove_host: str = "127.0.0.1",
+                 foxglove_tls: ssl.SSLContext | None = None) -> int:
     """The mission on real hardware, on the wall clock, until done or a signal."""
     from ramp.autonomy.executive.autonomy import Autonomy
     from ramp.autonomy.hal import driver_class
@@ -195,9 +220,10 @@ def run_on_robot(cfg: AutonomyConfig, backend: tuple[str, int], *,
     now = clock.now()
     live = None
     if foxglove_port is not None:  # before any device: a port in use changes nothing
-        live = FoxgloveLive(port=foxglove_port, name="ramp-autonomy", latched=LATCHED,
-                            origins=foxglove_origins)
         try:
+            live = FoxgloveLive(port=foxglove_port, name="ramp-autonomy", latched=LATCHED,
+                                origins=foxglove_origins, host=foxglove_host,
+                                ssl_context=foxglove_tls)
             live.start(now)
         except LiveViewError as exc:
             print(f"ramp-autonomy: --foxglove-port: {exc}", file=sys.stderr)
@@ -216,7 +242,8 @@ def run_on_robot(cfg: AutonomyConfig, backend: tuple[str, int], *,
             device.fault = exc     # without it; the mission waits for its sensors (naming
             log.error("%s", exc)   # this one) and then for an operator
     lidar.start()  # scans on demand: the mission asks for them (Perception.start's steps)
-    autonomy = Autonomy(scheduler, perception, cfg, backend, start_box=start_box)
+    autonomy = Autonomy(scheduler, perception, cfg, backend, start_box=start_box,
+                        backend_tls=backend_tls)
     view = None
     if live is not None:  # after the mission's task, so each sample sees that tick's work
         view = AutonomyView.watching(live, autonomy)

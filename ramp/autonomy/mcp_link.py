@@ -35,6 +35,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import ssl
 from collections.abc import Callable, Iterable
 
 from ramp.clock import Clock
@@ -79,7 +80,9 @@ class McpLink:
                  reply_timeout: float = 2.0, heartbeat_s: float | None = 0.25,
                  connect_timeout: float = 2.0, backoff_min: float = 0.5,
                  backoff_max: float = 8.0,
-                 on_connect: Callable[[McpLink], None] | None = None) -> None:
+                 on_connect: Callable[[McpLink], None] | None = None,
+                 ssl_context: ssl.SSLContext | None = None) -> None:
+        """`ssl_context`: the link runs inside mutual TLS (`mcps://`, SPEC 13)."""
         host, port = parse_backend(address)
         check_seconds(name, reply_timeout=reply_timeout, connect_timeout=connect_timeout,
                       backoff_min=backoff_min, backoff_max=backoff_max,
@@ -94,7 +97,7 @@ class McpLink:
         self.stats = {"connects": 0, "connect_failures": 0, "disconnects": 0, "sent": 0,
                       "replies": 0, "heartbeats": 0, "timeouts": 0, "lost_requests": 0}
         self.fault = ""
-        self.client = TcpClient(host, port, now=clock.now, loop=loop,
+        self.client = TcpClient(host, port, now=clock.now, loop=loop, ssl_context=ssl_context,
                                 connect_timeout=connect_timeout, backoff_min=backoff_min,
                                 backoff_max=backoff_max, on_connected=self._connected,
                                 on_data=self._on_data, on_lost=self._lost,

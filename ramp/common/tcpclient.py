@@ -36,6 +36,7 @@ import math
 import os
 import select
 import socket
+import ssl
 from collections.abc import Callable
 from typing import Protocol
 
@@ -88,8 +89,14 @@ class TcpClient:
                  on_lost: Callable[[float, str], None] = _nothing,
                  on_eof: Callable[[float], str] | None = None,
                  connect_hint: str = "",
-                 stats: dict[str, int] | None = None) -> None:
+                 stats: dict[str, int] | None = None,
+                 ssl_context: ssl.SSLContext | None = None) -> None:
         self.host, self.port = host, port
+        #: TLS (`mcps://`, SPEC 13): after the TCP connect, a handshake, driven like the
+        #: connect (never blocking, under the same deadline); the peer is told `connected`
+        #: only once it is done.
+        self.ssl_context = ssl_context
+        self._handshaking = False
         self.now = now
         self.loop = loop
         self.connect_timeout = connect_timeout
@@ -156,10 +163,13 @@ class TcpClient:
             if now >= self.retry_at:
                 self._attempt(now)
         elif self.state == CONNECTING:
-            self._check_connect(now)
+            if self._handshaking:
+                self._handshake(now)
+            else:
+                self._check_connect(now)
         elif self.state == CONNECTED:
             poll_in = self._poll_in
-            if poll_in is None or poll_in(0):
+            if poll_in is None or poll_in(0) or _buffered(self._sock):
                 self.on_readable()
             if self._out or self._writer:
                 self.flush()
@@ -200,7 +210,8 @@ class TcpClient:
         while self._out:
             try:
                 n = sock.send(self._out)
-            except (BlockingIOError, InterruptedError):
+            except (BlockingIOError, InterruptedError, ssl.SSLWantWriteError,
+                    ssl.SSLWantReadError):
                 break
             except OSError as exc:
                 self.drop(self.now(), f"sending failed: {exc.strerror or exc}")
@@ -218,12 +229,13 @@ class TcpClient:
         poll_in = self._poll_in
         first = True
         while budget > 0 and self._sock is sock:
-            if not first and poll_in is not None and not poll_in(0):
+            if not first and poll_in is not None and not poll_in(0) and not _buffered(sock):
                 return  # nothing more has arrived (what a failing recv would say)
             first = False
             try:
                 data = sock.recv(READ_CHUNK)
-            except (BlockingIOError, InterruptedError):
+            except (BlockingIOError, InterruptedError, ssl.SSLWantReadError,
+                    ssl.SSLWantWriteError):
                 return
             except OSError as exc:
                 self.drop(now, f"connection failed: {exc.strerror or exc}")
@@ -262,7 +274,7 @@ class TcpClient:
         self._sock = sock
         self.stats["connects"] += 1
         if err == 0:
-            self._connected(now)
+            self._tcp_connected(now)
         elif err in _IN_PROGRESS:
             self.state = CONNECTING
             self._connect_deadline = now + self.connect_timeout
@@ -280,12 +292,56 @@ class TcpClient:
         if writable:
             err = sock.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR)
             if err == 0:
-                self._connected(now)
+                self._tcp_connected(now)
             else:
                 self._failed(now, f"cannot connect: {_strerror(err)}")
         elif now >= self._connect_deadline:
             hint = f" ({self.connect_hint})" if self.connect_hint else ""
             self._failed(now, f"connect timed out after {self.connect_timeout:.1f} s{hint}")
+
+    def _tcp_connected(self, now: float) -> None:
+        """TCP is up: connected, or (TLS) the handshake begins under the connect's deadline."""
+        if self.ssl_context is None:
+            self._connected(now)
+            return
+        sock = self._sock
+        assert sock is not None
+        self._want_writable(False)
+        try:
+            self._sock = self.ssl_context.wrap_socket(
+                sock, server_hostname=self.host, do_handshake_on_connect=False)
+        except (ssl.SSLError, OSError) as exc:
+            self._failed(now, f"TLS failed: {exc}")
+            return
+        self.state = CONNECTING
+        self._handshaking = True
+        self._connect_deadline = now + self.connect_timeout
+        self._handshake(now)
+
+    def _handshake(self, now: float) -> None:
+        sock = self._sock
+        assert isinstance(sock, ssl.SSLSocket)
+        try:
+            sock.do_handshake()
+        except ssl.SSLWantReadError:
+            self._want_writable(False)
+        except ssl.SSLWantWriteError:
+            self._want_writable(True)
+        except ssl.SSLCertVerificationError as exc:
+            self._failed(now, f"the robot's certificate is not trusted: {exc.verify_message} "
+                              "(is --ca the robot's CA, and the host a name or address "
+                              "its certificate was made for?)")
+            return
+        except (ssl.SSLError, OSError) as exc:
+            self._failed(now, f"TLS handshake failed: {getattr(exc, 'reason', None) or exc} "
+                              "(does the robot accept this certificate?)")
+            return
+        else:
+            self._handshaking = False
+            self._connected(now)
+            return
+        if now >= self._connect_deadline:
+            self._failed(now, f"TLS handshake timed out after {self.connect_timeout:.1f} s")
 
     def _failed(self, now: float, reason: str) -> None:
         self.stats["connect_failures"] += 1
@@ -305,7 +361,9 @@ class TcpClient:
         self.on_connected(now)
 
     def _on_writable(self) -> None:
-        if self.state == CONNECTING:
+        if self.state == CONNECTING and self._handshaking:
+            self._handshake(self.now())
+        elif self.state == CONNECTING:
             self._check_connect(self.now())
         else:
             self.flush()
@@ -332,9 +390,15 @@ class TcpClient:
             with contextlib.suppress(OSError):
                 sock.close()
         self._writer = False
+        self._handshaking = False
         self._out.clear()
         if self.state in (CONNECTING, CONNECTED):
             self.state = WAITING
+
+
+def _buffered(sock: socket.socket | None) -> bool:
+    """Decrypted bytes TLS holds that a poll of the descriptor cannot see."""
+    return isinstance(sock, ssl.SSLSocket) and sock.pending() > 0
 
 
 def _is_ip(host: str) -> bool:

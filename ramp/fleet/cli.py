@@ -12,12 +12,14 @@ from __future__ import annotations
 import argparse
 import logging
 import signal
+import ssl
 import sys
 from pathlib import Path
 from types import FrameType
 from typing import Any
 
 from ramp import fleetconf
+from ramp.common.endpoint import add_tls_arguments, context_for, split_scheme
 from ramp.common.hostport import parse_hostport
 from ramp.common.yamlload import LinedMap, YamlError, load_file
 
@@ -32,7 +34,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", default="ramp.yaml", help="the robot's ramp.yaml (its fleet: "
                    "block; default ./ramp.yaml)")
     p.add_argument("--backend", help="the backend's HOST:PORT (default 127.0.0.1 and the "
-                   "config's server.port)")
+                   "config's server.port); mcps://HOST:PORT for mutual TLS with "
+                   "--cert/--key/--ca or --identity")
     p.add_argument("--serial", help="the robot's serial (overrides fleet.serial)")
     p.add_argument("--manufacturer", help="overrides fleet.manufacturer")
     p.add_argument("--broker", help="the broker's HOST:PORT (overrides fleet.broker)")
@@ -42,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "fleet.state_dir, $STATE_DIRECTORY, ~/.local/state/ramp)")
     p.add_argument("--log-level", default="info",
                    choices=["debug", "info", "warning", "error"])
+    add_tls_arguments(p, "the backend")
     return p
 
 
@@ -68,7 +72,8 @@ def load(args: argparse.Namespace) -> tuple[fleetconf.FleetConfig, tuple[str, in
     cfg = fleetconf.parse(raw, path.resolve().parent)
     if args.backend:
         try:
-            backend = parse_hostport(args.backend, default_host="127.0.0.1")
+            _, address = split_scheme(args.backend)
+            backend = parse_hostport(address, default_host="127.0.0.1")
         except ValueError as exc:
             raise ValueError(f"--backend: {exc}") from None
     else:
@@ -85,16 +90,18 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         cfg, backend, root = load(args)
+        backend_tls = context_for(split_scheme(args.backend or "")[0], args)
     except ValueError as exc:
         print(f"ramp-fleet-agent: {exc}", file=sys.stderr)
         return 2
     logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    return run(cfg, backend, state_dir=Path(args.state_dir) if args.state_dir else None)
+    return run(cfg, backend, state_dir=Path(args.state_dir) if args.state_dir else None,
+               backend_tls=backend_tls)
 
 
 def run(cfg: fleetconf.FleetConfig, backend: tuple[str, int], *,
-        state_dir: Path | None = None) -> int:
+        state_dir: Path | None = None, backend_tls: ssl.SSLContext | None = None) -> int:
     """The agent on the wall clock until SIGINT/SIGTERM."""
     from ramp import __version__
     from ramp.clock import MonotonicClock
@@ -110,7 +117,7 @@ def run(cfg: fleetconf.FleetConfig, backend: tuple[str, int], *,
     clock = MonotonicClock()
     scheduler = Scheduler(clock, 50.0)
     headers = v.Headers(cfg.manufacturer, cfg.serial)
-    link = FleetMcpLink(*backend, clock=clock, loop=scheduler)
+    link = FleetMcpLink(*backend, clock=clock, loop=scheduler, ssl_context=backend_tls)
     mqtt = MqttLink(headers, *cfg.broker, tls=cfg.tls)
     pause = PauseStore(state_dir or cfg.state_dir or default_state_dir(), cfg.serial)
     identity = Identity(cfg.series, cfg.speed_max, *cfg.size, versions={"ramp": __version__})

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import math
+import ssl
 from collections.abc import Callable
 
 from ramp.clock import Clock
@@ -33,7 +34,8 @@ class FleetMcpLink:
     def __init__(self, host: str, port: int, *, clock: Clock, loop: IoLoop | None = None,
                  reply_timeout: float = 2.0, heartbeat_s: float = 0.25,
                  on_connect: Callable[[], None] | None = None,
-                 on_lost: Callable[[str], None] | None = None) -> None:
+                 on_lost: Callable[[str], None] | None = None,
+                 ssl_context: ssl.SSLContext | None = None) -> None:
         self.clock = clock
         self.reply_timeout = reply_timeout
         self.heartbeat_s = heartbeat_s
@@ -41,6 +43,7 @@ class FleetMcpLink:
         self.on_lost_cb = on_lost
         self.fault = "not connected yet"
         self.client = TcpClient(host, port, now=clock.now, loop=loop, backoff_min=0.25,
+                                ssl_context=ssl_context,
                                 backoff_max=2.0, on_connected=self._connected,
                                 on_data=self._on_data, on_lost=self._lost)
         self._session: McpSession[OnReply | None] = McpSession()

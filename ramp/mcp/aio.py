@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import socket
+import ssl
 from collections import deque
 from typing import Any
 
@@ -41,11 +42,15 @@ class AsyncMcpClient:
         self._task = asyncio.create_task(self._read_loop(), name=f"mcp-read {host}:{port}")
 
     @classmethod
-    async def connect(cls, host: str, port: int, timeout: float = 2.0) -> AsyncMcpClient:
-        """Open a connection; ConnectionError (refused, unreachable, timed out) otherwise."""
+    async def connect(cls, host: str, port: int, timeout: float = 2.0,
+                      ssl_context: ssl.SSLContext | None = None) -> AsyncMcpClient:
+        """Open a connection (inside mutual TLS with `ssl_context`); ConnectionError
+        (refused, unreachable, timed out, a handshake refused) otherwise."""
         try:
             reader, writer = await asyncio.wait_for(
-                asyncio.open_connection(host, port), timeout)
+                asyncio.open_connection(host, port, ssl=ssl_context,
+                                        server_hostname=host if ssl_context else None),
+                timeout)
         except (OSError, TimeoutError) as exc:
             reason = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
             raise ConnectionError(f"cannot connect to {host}:{port}: {reason}") from exc

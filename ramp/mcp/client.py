@@ -8,6 +8,7 @@ shares; this file only moves bytes over a socket and waits.
 from __future__ import annotations
 
 import socket
+import ssl
 import time
 from collections import deque
 from collections.abc import Iterable
@@ -43,11 +44,19 @@ class McpClient:
     errors = staticmethod(errors)
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
-                 timeout: float = 2.0) -> None:
+                 timeout: float = 2.0, ssl_context: ssl.SSLContext | None = None) -> None:
+        """`ssl_context`: MCP inside mutual TLS (`mcps://`, `ramp.common.endpoint`)."""
         self.host, self.port, self.timeout = host, port, timeout
         self._session: McpSession[None] = McpSession(MAX_RESPONSE_LINE)
         self._lines: deque[Reply[None]] = deque()
-        self._sock: socket.socket | None = socket.create_connection((host, port), timeout)
+        sock = socket.create_connection((host, port), timeout)
+        if ssl_context is not None:
+            try:
+                sock = ssl_context.wrap_socket(sock, server_hostname=host)
+            except BaseException:
+                sock.close()
+                raise
+        self._sock: socket.socket | None = sock
         # Requests are small and latency matters more than packet count (one request, one
         # answer): without this Nagle holds a message back behind an unacknowledged one.
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)

@@ -16,6 +16,7 @@ import os
 import select
 import signal
 import socket
+import ssl
 import sys
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -25,6 +26,8 @@ from typing import TextIO
 
 from prompt_toolkit.history import FileHistory, History, InMemoryHistory
 
+from ramp.common.endpoint import add_tls_arguments, context_for, split_scheme
+from ramp.common.hostport import format_hostport
 from ramp.errors import ProtocolError
 from ramp.mcp.client import DEFAULT_PORT, McpClient, parse_address
 from ramp.mcp.messages import Request, Response
@@ -224,8 +227,11 @@ class Shell:
 
     def __init__(self, host: str, port: int, out: TextIO, *, color: bool = False,
                  timeout: float = DEFAULT_TIMEOUT, raw: bool = False,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic,
+                 ssl_context: ssl.SSLContext | None = None) -> None:
         self.host, self.port, self.out = host, port, out
+        #: `mcps://` (SPEC 13): every connection of this shell runs inside mutual TLS.
+        self.ssl_context = ssl_context
         self.color, self.timeout, self.raw, self.clock = color, timeout, raw, clock
         self.main: McpClient | None = None
         self.monitor: McpClient | None = None
@@ -248,11 +254,18 @@ class Shell:
     # -- connections --------------------------------------------------------------------------
     @property
     def address(self) -> str:
-        return f"{self.host}:{self.port}"
+        scheme = "mcps://" if self.ssl_context is not None else ""
+        return f"{scheme}{format_hostport(self.host, self.port)}"
 
     def _open(self) -> McpClient:
         try:
-            return McpClient(self.host, self.port, timeout=self.timeout)
+            return McpClient(self.host, self.port, timeout=self.timeout,
+                             ssl_context=self.ssl_context)
+        except ssl.SSLCertVerificationError as exc:
+            raise ConnectionLost(f"cannot connect to {self.address}: the robot's certificate "
+                                 f"is not trusted ({exc.verify_message}): is --ca the robot's "
+                                 "CA, and the host a name its certificate was made for?"
+                                 ) from exc
         except OSError as exc:
             reason = exc.strerror or str(exc) or type(exc).__name__
             raise ConnectionLost(f"cannot connect to {self.address}: {reason}") from exc
@@ -651,7 +664,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="Interactive MCP client: tab completion from describe, tables for gets, "
                     "watch and hold.")
     parser.add_argument("address", nargs="?", default=None,
-                        help=f"HOST:PORT of the supervisor (default 127.0.0.1:{DEFAULT_PORT})")
+                        help=f"HOST:PORT of the supervisor (default 127.0.0.1:{DEFAULT_PORT}); "
+                             "mcps://HOST:PORT for mutual TLS with --cert/--key/--ca or "
+                             "--identity")
     parser.add_argument("-c", dest="command", metavar="REQUEST",
                         help="send one line (an MCP message or a shell command such as "
                              "'hold ...'), print the answer and exit: 0 ok, 1 error "
@@ -661,6 +676,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--no-color", action="store_true", help="never use colours")
     parser.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT,
                         help=f"seconds to wait for an answer (default {DEFAULT_TIMEOUT:g})")
+    add_tls_arguments(parser)
     return parser
 
 
@@ -668,7 +684,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        host, port = parse_address(args.address)
+        tls, address = split_scheme(args.address or "")
+        host, port = parse_address(address or None)
+        ssl_context = context_for(tls, args)
     except ValueError as exc:
         parser.error(str(exc))
     if not (math.isfinite(args.timeout) and 0 < args.timeout <= MAX_TIMEOUT_S):
@@ -676,7 +694,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                      f"got {args.timeout:g}")
     color = (sys.stdout.isatty() and not args.no_color
              and not os.environ.get("NO_COLOR") and os.environ.get("TERM") != "dumb")
-    shell = Shell(host, port, sys.stdout, color=color, timeout=args.timeout, raw=args.raw)
+    shell = Shell(host, port, sys.stdout, color=color, timeout=args.timeout, raw=args.raw,
+                  ssl_context=ssl_context)
     if args.command is not None:
         return one_shot(shell, args.command)
     try:

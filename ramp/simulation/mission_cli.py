@@ -75,6 +75,13 @@ def add_mission_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser])
                    help="stream the same channels live to Foxglove over its WebSocket "
                         "protocol on 127.0.0.1:P (0 picks a free port; printed); best with "
                         "--realtime")
+    # (ramp.autonomy.live.foxglove_live.add_host_arguments' flags; not imported here: every
+    # `ramp` command builds this parser, and the SBC's `ramp run` should not load the view)
+    p.add_argument("--foxglove-host", default="127.0.0.1", metavar="HOST",
+                   help="where the live view listens (default 127.0.0.1); any other address "
+                        "needs --foxglove-cert and --foxglove-key (wss://)")
+    p.add_argument("--foxglove-cert", metavar="FILE", help="the live view's certificate")
+    p.add_argument("--foxglove-key", metavar="FILE", help="its private key")
     p.add_argument("--command-port", type=int, default=None,
                    help="with --realtime: the autonomy's command endpoint for a fleet agent "
                    "(JSON lines on loopback; 0 picks a port); the mission then waits for "
@@ -223,10 +230,16 @@ def _watch(run: Any, args: argparse.Namespace) -> None:
 
     live = None
     if args.foxglove_port is not None:
-        from ramp.autonomy.live import FoxgloveLive
+        from ramp.autonomy.live import FoxgloveLive, LiveViewError
+        from ramp.autonomy.live.foxglove_live import server_tls
         from ramp.autonomy.live.view import LATCHED
 
-        live = FoxgloveLive(port=args.foxglove_port, name="ramp sim mission", latched=LATCHED)
+        try:
+            live = FoxgloveLive(port=args.foxglove_port, name="ramp sim mission",
+                                latched=LATCHED, host=args.foxglove_host,
+                                ssl_context=server_tls(args.foxglove_cert, args.foxglove_key))
+        except (ValueError, LiveViewError) as exc:
+            raise UsageError(f"--foxglove-host: {exc}") from exc
     watcher = MissionRecorder(args.record, live=live)
     run.observers.append(watcher)
     if live is None:

@@ -15,6 +15,7 @@ import signal
 import sys
 from collections.abc import Sequence
 
+from ramp.common.endpoint import add_tls_arguments, certificate_name, context_for, split_scheme
 from ramp.mcp.client import parse_address
 from ramp.teleop.profile import DEFAULT_PROFILE, ProfileError, ProfileLibrary
 
@@ -61,15 +62,17 @@ def build_parser() -> argparse.ArgumentParser:
         description="Operator console in the browser for a RAMP robot: live status, every "
                     "function, a gamepad with a dead-man button, and a STOP that always works.")
     p.add_argument("--backend", default="127.0.0.1:5577", metavar="HOST:PORT",
-                   help="the robot's MCP address (default 127.0.0.1:5577)")
+                   help="the robot's MCP address (default 127.0.0.1:5577); mcps://HOST:PORT "
+                        "for mutual TLS with --cert/--key/--ca or --identity")
     p.add_argument("--autonomy", default=None, metavar="HOST:PORT",
                    help="the autonomy's live view (ramp-autonomy --foxglove-port, ramp sim "
                         "mission --foxglove-port): shows its state, map and alerts; without "
                         "it, or while it is unreachable, the console works as before")
     p.add_argument("--http-port", type=int, default=8080, metavar="P",
                    help="port of the page on 127.0.0.1 (default 8080; 0 picks a free one)")
-    p.add_argument("--name", type=_name, default="operator",
-                   help="who takes control with 'Take control' (default operator)")
+    p.add_argument("--name", type=_name, default=None,
+                   help="who takes control with 'Take control' (default operator; over "
+                        "mcps:// the certificate's name, the only one the robot accepts)")
     p.add_argument("--profile", default=DEFAULT_PROFILE, metavar="NAME",
                    help="gamepad profile: a file NAME.yaml among the built-in profiles or in "
                         "$XDG_CONFIG_HOME/ramp/profiles (default: default)")
@@ -79,16 +82,29 @@ def build_parser() -> argparse.ArgumentParser:
                    help="volts of an empty and a full battery for the gauge (default 17:21, "
                         "MARTE's 5S LiPo rail)")
     p.add_argument("-v", "--verbose", action="store_true", help="log link changes")
+    add_tls_arguments(p)
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        host, port = parse_address(args.backend)
+        tls, backend = split_scheme(args.backend)
+        host, port = parse_address(backend)
+        ssl_context = context_for(tls, args)
     except ValueError as exc:
         print(f"ramp-teleop: --backend: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    name = args.name or "operator"
+    if ssl_context is not None:  # over TLS control is acquired under one's own identity
+        identity = certificate_name(args.cert or args.identity)
+        if args.name is None and identity:
+            name = identity
+        elif identity and args.name != identity:
+            print(f"ramp-teleop: --name {args.name}: the robot accepts control only under "
+                  f"this console's identity, {identity} (its certificate's name)",
+                  file=sys.stderr)
+            return EXIT_USAGE
     autonomy = None
     if args.autonomy is not None:
         try:
@@ -126,8 +142,9 @@ def main(argv: Sequence[str] | None = None) -> int:
               file=sys.stderr)
         return EXIT_USAGE
     http_port = sock.getsockname()[1]
-    console = Console(host, port, name=args.name, library=library, profile=profile,
-                      poll_hz=args.poll_hz, battery=args.battery, autonomy=autonomy)
+    console = Console(host, port, name=name, library=library, profile=profile,
+                      poll_hz=args.poll_hz, battery=args.battery, autonomy=autonomy,
+                      ssl_context=ssl_context)
     # ws="websockets-sansio": name the WebSocket implementation, so a missing library is an
     # import error at start rather than uvicorn quietly answering every upgrade with 404.
     config = uvicorn.Config(create_app(console), ws="websockets-sansio", lifespan="on",

@@ -14,6 +14,7 @@ import functools
 import logging
 import math
 import re
+import ssl
 from collections.abc import Callable
 from typing import Any
 
@@ -112,12 +113,14 @@ class Console:
     def __init__(self, host: str, port: int, *, name: str, library: ProfileLibrary,
                  profile: Profile, poll_hz: float = 10.0,
                  battery: tuple[float, float] = (17.0, 21.0),
-                 autonomy: tuple[str, int] | None = None) -> None:
+                 autonomy: tuple[str, int] | None = None,
+                 ssl_context: ssl.SSLContext | None = None) -> None:
         self.host, self.port, self.name = host, port, name
         self.library, self.profile = library, profile
         self.poll_hz, self.battery = poll_hz, battery
-        self.status_link = Link(host, port, "status")
-        self.command_link = Link(host, port, "command", on_change=self._command_link_changed)
+        self.status_link = Link(host, port, "status", ssl_context=ssl_context)
+        self.command_link = Link(host, port, "command", on_change=self._command_link_changed,
+                                 ssl_context=ssl_context)
         self.poller = StatusPoller(self.status_link, poll_hz, on_status=self._on_status,
                                    on_catalog=self._on_catalog)
         self.controller = Controller(stop_for=self._stop_for)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import ssl
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -37,8 +38,10 @@ class Link:
 
     def __init__(self, host: str, port: int, role: str, *,
                  on_change: Callable[[bool, str], None] | None = None,
-                 retry: float = RETRY_S, answer_timeout: float = ANSWER_TIMEOUT_S) -> None:
+                 retry: float = RETRY_S, answer_timeout: float = ANSWER_TIMEOUT_S,
+                 ssl_context: ssl.SSLContext | None = None) -> None:
         self.host, self.port, self.role = host, port, role
+        self.ssl_context = ssl_context  # mcps:// (SPEC 13)
         self.retry, self.answer_timeout = retry, answer_timeout
         self.on_change = on_change
         self.client: AsyncMcpClient | None = None
@@ -56,7 +59,8 @@ class Link:
         while not self._stopping:
             try:
                 client = await AsyncMcpClient.connect(self.host, self.port,
-                                                      timeout=self.answer_timeout)
+                                                      timeout=self.answer_timeout,
+                                                      ssl_context=self.ssl_context)
             except ConnectionError as exc:
                 if str(exc) != self.detail:  # say why once, not at every retry
                     self.detail = str(exc)

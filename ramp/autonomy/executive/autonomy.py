@@ -22,6 +22,7 @@ the pose tracker forget its prior (the operator may move the robot anywhere).
 from __future__ import annotations
 
 import math
+import ssl
 from collections.abc import Callable
 
 from ramp.autonomy.config import AutonomyConfig
@@ -47,11 +48,12 @@ class Autonomy:
     def __init__(self, scheduler: Scheduler, perception: Perception, config: AutonomyConfig,
                  backend: str | tuple[str, int], *, localize: Localize | None = None,
                  detect: Detect | None = None, start_box: str | None = None,
-                 mission_hz: float = MISSION_HZ) -> None:
+                 mission_hz: float = MISSION_HZ,
+                 backend_tls: ssl.SSLContext | None = None) -> None:
         self.scheduler = scheduler
         self.config = config
         self.link = McpLink(backend, clock=scheduler.clock, loop=scheduler, heartbeat_s=None,
-                            name="backend")
+                            name="backend", ssl_context=backend_tls)
         self.robot = RobotLink(self.link, perception.odometry, owner=OWNER)
         self.kit = Kit.build(self.robot, perception, config, localize=localize, detect=detect,
                              start_box=start_box)

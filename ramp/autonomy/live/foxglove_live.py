@@ -46,6 +46,7 @@ import asyncio
 import contextlib
 import itertools
 import logging
+import ssl
 import threading
 import time
 from collections import deque
@@ -54,6 +55,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
 from ramp.autonomy.live import protocol
+from ramp.common.access import is_loopback
 from ramp.common.hostport import format_hostport
 from ramp.errors import RampError
 from ramp.recorder.jsonbytes import json_payload
@@ -230,9 +232,16 @@ class FoxgloveLive:
     def __init__(self, *, host: str = DEFAULT_HOST, port: int = 0, name: str = "ramp",
                  origin_ns: int | None = None, latched: Iterable[str] = (),
                  depth: int = DEFAULT_DEPTH, inbox: int = 1024,
-                 inbox_bytes: int = 8 << 20, origins: Iterable[str] = ()) -> None:
+                 inbox_bytes: int = 8 << 20, origins: Iterable[str] = (),
+                 ssl_context: ssl.SSLContext | None = None) -> None:
         if depth < 1:
             raise ValueError("depth must be at least 1")
+        if ssl_context is None and not is_loopback(host):
+            # SPEC 13: off loopback the view is served only over TLS (wss://), read-only.
+            raise LiveViewError(f"foxglove: serving the live view on {host} needs TLS "
+                                "(--foxglove-cert and --foxglove-key: a server certificate, "
+                                "e.g. the robot's from `ramp certs init`), or 127.0.0.1")
+        self.ssl_context = ssl_context
         self.host = host
         self.port = port
         self.name = name
@@ -316,7 +325,8 @@ class FoxgloveLive:
     @property
     def url(self) -> str:
         """Where Foxglove connects: `ws://HOST:PORT`."""
-        return f"ws://{format_hostport(self.host, self.port)}"
+        scheme = "wss" if self.ssl_context is not None else "ws"
+        return f"{scheme}://{format_hostport(self.host, self.port)}"
 
     # -- figures ------------------------------------------------------------------------------
     @property
@@ -432,7 +442,7 @@ class FoxgloveLive:
                                  subprotocols=[Subprotocol(protocol.SUBPROTOCOL)],
                                  compression=None, max_size=MAX_CLIENT_MESSAGE,
                                  max_queue=4, close_timeout=1.0,
-                                 process_request=self._check_origin)
+                                 process_request=self._check_origin, ssl=self.ssl_context)
         except OSError as exc:
             self._start_error = exc
             self._ready.set()
@@ -575,3 +585,29 @@ def _some(items: list[Any]) -> str:
     """The first of a list, and how many more: `7 (and 19999 more)`."""
     more = f" (and {len(items) - 1} more)" if len(items) > 1 else ""
     return f"{items[0]}{more}"
+
+
+def add_host_arguments(parser: Any) -> None:
+    """`--foxglove-host`, `--foxglove-cert`, `--foxglove-key` (SPEC 13): where the live view
+    listens, and its server certificate for `wss://` off loopback."""
+    parser.add_argument("--foxglove-host", default=DEFAULT_HOST, metavar="HOST",
+                        help=f"where the live view listens (default {DEFAULT_HOST}); any "
+                             "other address needs --foxglove-cert and --foxglove-key (wss://)")
+    parser.add_argument("--foxglove-cert", metavar="FILE",
+                        help="the live view's server certificate (e.g. the robot's robot.crt)")
+    parser.add_argument("--foxglove-key", metavar="FILE", help="its private key")
+
+
+def server_tls(cert: str | None, key: str | None) -> ssl.SSLContext | None:
+    """The live view's `wss://` context from the flags; ValueError saying what is wrong."""
+    if cert is None and key is None:
+        return None
+    if cert is None or key is None:
+        raise ValueError("--foxglove-cert and --foxglove-key go together")
+    ctx = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+    ctx.minimum_version = ssl.TLSVersion.TLSv1_2
+    try:
+        ctx.load_cert_chain(cert, key)
+    except (ssl.SSLError, OSError) as exc:
+        raise ValueError(f"--foxglove-cert {cert} --foxglove-key {key}: {exc}") from None
+    return ctx

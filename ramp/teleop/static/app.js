@@ -452,6 +452,14 @@
     const mine = s && s.control && s.control.mine;
     pc.textContent = owner === "none" ? "control free" : `control: ${owner}${mine ? " (you)" : ""}`;
     setState(pc, mine ? "drive" : owner === "none" ? "" : "warn", STATE_CLASSES);
+    // Who the robot says this console is (SPEC 13: robot:access.me=(IDENTITY,ROLE)).
+    const me = (value("robot:access.me") || "").split(",");
+    const pm = $("pill-me");
+    pm.hidden = me.length !== 2;
+    if (me.length === 2) {
+      pm.textContent = `you: ${me[0]} (${me[1]})`;
+      setState(pm, me[1] === "observer" ? "warn" : "", STATE_CLASSES);
+    }
     $("take-control").disabled = !!mine;
     $("hand-back").disabled = !(s && s.control && s.control.want);
   }
