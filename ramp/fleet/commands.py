@@ -68,7 +68,14 @@ def cmd_init(args: argparse.Namespace) -> int:
     return 0
 
 
-FLEET_COMMANDS: dict[str, Callable[[SubParsers], None]] = {"init": add_init}  # noqa: F821
+def add_sim(sub: SubParsers) -> None:
+    from ramp.fleet.sim import add_sim as add
+
+    add(sub)
+
+
+FLEET_COMMANDS: dict[str, Callable[[SubParsers], None]] = {  # noqa: F821
+    "init": add_init, "sim": add_sim}
 
 
 def add_fleet_parser(sub: SubParsers) -> None:
