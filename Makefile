@@ -13,7 +13,7 @@ STAMP := $(VENV)/.installed
 BUILD_ACCEL = $(PY) scripts/build_accel.py || echo "make: the compiled hot path did not build;" \
 	"RAMP runs the sources (the same results, slower)"
 
-.PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak soak-safety clean docs accel test-deployed
+.PHONY: run teleop mission fleet campaign screenshots test lint bench bench-quick fuzz soak soak-safety clean docs accel test-deployed
 
 # RAMP, then the example plugins: Scout's arm, and the guides' winch (SPEC 10: installed as a
 # team installs a plugin package; their entry points are what RAMP finds).
@@ -60,6 +60,13 @@ mission: $(STAMP) $(ACCEL)
 	robot=$$!; trap 'kill $$robot 2>/dev/null; wait $$robot 2>/dev/null' EXIT; \
 	sleep 2; $(VENV)/bin/ramp-teleop --backend 127.0.0.1:$(ROBOT_PORT) \
 	  --autonomy 127.0.0.1:$(VIEW_PORT) --http-port $(TELEOP_PORT)
+
+# A fleet on this machine (SPEC 14): a local Mosquitto, MARTE with the autonomy, MARTE without,
+# Scout, each with its fleet agent, and the supervisor's page; open the address it prints.
+# Ctrl-C stops the robots first, then the rest.
+FLEET_PORT ?= 8090
+fleet: $(STAMP)
+	$(VENV)/bin/ramp fleet sim --http-port $(FLEET_PORT)
 
 # The issue's campaign: 40 seeded missions over both start boxes and all four headings.
 campaign: $(STAMP) $(ACCEL)

@@ -21,7 +21,7 @@
 
   function tile(r) {
     const t = el("article", { class: `tile ${r.connection}`, "data-testid": `robot-${r.serial}`, "data-serial": r.serial });
-    t.append(el("h2", { text: r.serial }), el("div", { class: "type", text: `${r.type} · ${r.manufacturer}` }));
+    t.append(el("h2", { text: r.serial }), el("div", { class: "type", "data-testid": "type", text: `${r.description || r.type} · ${r.manufacturer}` }));
     const dl = el("dl");
     fact(dl, "connection", `${r.connection}${r.age_s !== null ? ` · ${r.age_s.toFixed(1)} s ago` : ""}`, "", "connection");
     fact(dl, "battery", r.battery !== null ? `${r.battery.toFixed(0)} %` : (r.voltage ? `${r.voltage.toFixed(2)} V` : "–"), "", "battery");
