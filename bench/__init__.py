@@ -28,5 +28,5 @@ AUTONOMY_SECTIONS: tuple[str, ...] = (
 
 #: Benchmark names, in the order they run.
 SECTIONS = ("tick", "round_trip", "tls", "interlocks", "command_to_wire", "watchdog_to_wire",
-            "startup", "recorder",
+            "startup", "recorder", "fleet",
             "arena", *AUTONOMY_SECTIONS)

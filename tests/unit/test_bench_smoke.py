@@ -69,6 +69,10 @@ def test_figures_are_real_measurements_beside_baselines(smoke: dict[str, Any]) -
     assert tls["flood"]["operator_connect_to_stop_ms"]["n"] > 0
     assert tls["flood"]["tick_late_us"]["flood"]["n"] > 0
 
+    fleet = smoke["fleet"]  # SPEC 14: Stop all through a real broker, every robot answering
+    assert fleet["stop_all_to_driving_false_ms"]["n"] == fleet["robots"] * fleet["rounds"]
+    assert all(r["stopped"] == fleet["robots"] for r in fleet["per_round"])
+
     c2w = smoke["command_to_wire"]
     assert c2w["single"]["missing"] == 0
     assert c2w["single"]["send_to_wire_us"]["p50"]["value"] > 0
