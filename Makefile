@@ -13,7 +13,7 @@ STAMP := $(VENV)/.installed
 BUILD_ACCEL = $(PY) scripts/build_accel.py || echo "make: the compiled hot path did not build;" \
 	"RAMP runs the sources (the same results, slower)"
 
-.PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak soak-safety clean docs accel
+.PHONY: run teleop mission campaign screenshots test lint bench bench-quick fuzz soak soak-safety clean docs accel test-deployed
 
 # RAMP, then the example plugins: Scout's arm, and the guides' winch (SPEC 10: installed as a
 # team installs a plugin package; their entry points are what RAMP finds).
@@ -26,11 +26,11 @@ $(STAMP): pyproject.toml examples/ramp-arm/pyproject.toml examples/ramp-winch/py
 	$(BUILD_ACCEL)
 	touch $(STAMP)
 
-# The simulator's hot path (the scheduler, the physics, the emulators, the AHRS) compiled with
-# mypyc into build/accel/ (scripts/build_accel.py, ramp/common/accel.py) at install: a
-# simulated mission runs faster, with the same results. `make accel` (and the targets that
-# run missions) rebuild it when one of its sources changed; until then, and wherever it cannot
-# be built (no C compiler), RAMP runs the sources.
+# The simulator's hot path (the physics, the emulators, the AHRS; nothing of the backend)
+# compiled with mypyc into build/accel/ (scripts/build_accel.py, ramp/common/accel.py) at
+# install: a simulated mission runs faster, with the same results. `make accel` (and the
+# targets that run missions) rebuild it when one of its sources, or a module they import,
+# changed; until then, and wherever it cannot be built (no C compiler), RAMP runs the sources.
 ACCEL := build/accel/manifest.json
 ACCEL_SOURCES := $(shell $(PYTHON) scripts/build_accel.py --list)
 $(ACCEL): scripts/build_accel.py $(ACCEL_SOURCES) | $(STAMP)
@@ -72,6 +72,21 @@ lint: $(STAMP)
 
 test: lint $(ACCEL)
 	$(PY) -m pytest
+	$(MAKE) --no-print-directory test-deployed
+
+# The backend's safety suites (watchdog, arbitration, interlocks, stalls, drivers) once more
+# as the robot runs them: RAMP_ACCEL=0, every module from its sources, as the service install
+# (no build) runs it. `make test` ran them beside the compiled simulator; the backend itself
+# is never compiled (scripts/build_accel.py), so both runs test the code the robot runs.
+SAFETY_SUITES := tests/hil_sim/test_safety.py tests/hil_sim/test_safety_model.py \
+	tests/hil_sim/test_latched_faults.py tests/hil_sim/test_commanders.py \
+	tests/hil_sim/test_interlocks.py tests/hil_sim/test_scout_interlocks.py \
+	tests/hil_sim/test_stalls.py tests/hil_sim/test_driver_bugs.py \
+	tests/hil_sim/test_room_for_a_stop.py tests/unit/test_scheduler.py \
+	tests/unit/test_sabertooth_driver.py tests/unit/test_odrive_driver.py \
+	tests/unit/test_phidget_driver.py
+test-deployed: $(STAMP)
+	RAMP_ACCEL=0 $(PY) -m pytest -q $(SAFETY_SUITES)
 
 bench: $(STAMP) $(ACCEL)
 	$(PY) -m bench

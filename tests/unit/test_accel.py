@@ -78,6 +78,130 @@ def test_ramp_accel_0_turns_it_off(monkeypatch: pytest.MonkeyPatch) -> None:
     assert not any(isinstance(f, accel.CompiledFinder) for f in sys.meta_path)
 
 
+def _build_script() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("_build_accel",
+                                                  accel.ROOT / "scripts" / "build_accel.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_build_hashes_every_first_party_module_a_compiled_one_imports(
+        tmp_path: Path) -> None:
+    """mypyc copies a `Final` of a module it does not compile: those sources count too."""
+    script = _build_script()
+    root = tmp_path
+    (root / "ramp" / "hal").mkdir(parents=True)
+    (root / "ramp" / "__init__.py").write_text("")
+    (root / "ramp" / "hal" / "__init__.py").write_text("")
+    (root / "ramp" / "hot.py").write_text(
+        "import json\nfrom ramp.hal.codec import BAUD\nfrom typing import TYPE_CHECKING\n"
+        "if TYPE_CHECKING:\n    from ramp import typed_only\n")
+    (root / "ramp" / "hal" / "codec.py").write_text("from .limits import MAX\nBAUD = 9600\n")
+    (root / "ramp" / "hal" / "limits.py").write_text("MAX = 127\n")
+    (root / "ramp" / "typed_only.py").write_text("")
+    (root / "ramp" / "unrelated.py").write_text("")
+    assert script.inputs(["ramp/hot.py"], root) == [
+        "ramp/__init__.py", "ramp/hal/__init__.py", "ramp/hal/codec.py", "ramp/hal/limits.py",
+        "ramp/hot.py", "ramp/typed_only.py"]
+
+
+def test_an_edited_module_that_is_only_imported_makes_the_build_stale(tmp_path: Path) -> None:
+    root = _build(tmp_path, inputs={"pkg/consts.py": hashlib.sha256(b"BAUD = 9600\n")
+                                    .hexdigest()})
+    (root / "pkg" / "consts.py").write_text("BAUD = 9600\n")
+    assert accel.check(tmp_path / "build", root)[1] == ""
+    (root / "pkg" / "consts.py").write_text("BAUD = 19200\n")
+    files, why = accel.check(tmp_path / "build", root)
+    assert files == {} and "pkg/consts.py changed since the build" in why
+
+
+def test_a_build_for_another_platform_or_abi_is_not_used(tmp_path: Path) -> None:
+    root = _build(tmp_path, platform="win-amd64")
+    assert "built for win-amd64" in accel.check(tmp_path / "build", root)[1]
+    root = _build(tmp_path / "arm", runtime={"group__mypyc": "group__mypyc.cpython-311-"
+                                                             "aarch64-linux-gnu.dylib"})
+    why = accel.check(tmp_path / "arm" / "build", root)[1]
+    assert "not an extension module of this interpreter" in why
+
+
+@pytest.fixture
+def no_finder(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("RAMP_ACCEL", raising=False)
+    monkeypatch.setattr(sys, "meta_path", [f for f in sys.meta_path
+                                           if not isinstance(f, accel.CompiledFinder)])
+    monkeypatch.setattr(accel, "_status", accel.status())
+
+
+def test_a_build_that_fails_to_import_falls_back_with_one_warning(
+        tmp_path: Path, no_finder: None, caplog: pytest.LogCaptureFixture) -> None:
+    """A binary of another machine (here: not an ELF at all) for this interpreter's suffix:
+    RAMP runs the sources and says why, once."""
+    root = _build(tmp_path)
+    (tmp_path / "build" / "group__mypyc.so").write_bytes(b"not a shared object")
+    with caplog.at_level("WARNING", logger="ramp.accel"):
+        status = accel.install(tmp_path / "build", root)
+    assert not status.active and "group__mypyc.so failed to import" in status.reason
+    assert not any(isinstance(f, accel.CompiledFinder) for f in sys.meta_path)
+    assert [r.getMessage() for r in caplog.records].count(
+        f"the compiled hot path cannot be used, running the sources: {status.reason}") == 1
+
+
+def test_a_module_that_fails_to_import_loads_its_source_and_turns_the_build_off(
+        tmp_path: Path, no_finder: None, monkeypatch: pytest.MonkeyPatch,
+        caplog: pytest.LogCaptureFixture) -> None:
+    root = tmp_path / "root"
+    (root / "accelpkg").mkdir(parents=True)
+    (root / "accelpkg" / "__init__.py").write_text("")
+    (root / "accelpkg" / "hot.py").write_text("X = 7\n")
+    (root / "accelpkg" / "cold.py").write_text("Y = 8\n")
+    bad = tmp_path / "hot.so"
+    bad.write_bytes(b"\x7fELF garbage")
+    monkeypatch.syspath_prepend(str(root))
+    finder = accel.CompiledFinder({"accelpkg.hot": bad, "accelpkg.cold": bad})
+    monkeypatch.setattr(sys, "meta_path", [finder, *sys.meta_path])
+    with caplog.at_level("WARNING", logger="ramp.accel"):
+        import accelpkg.cold  # type: ignore[import-not-found]
+        import accelpkg.hot  # type: ignore[import-not-found]
+    try:
+        assert accelpkg.hot.X == 7 and accelpkg.cold.Y == 8
+        assert accelpkg.cold.__file__ == str(root / "accelpkg" / "cold.py")
+        assert finder.files == {} and not accel.status().active
+        assert len(caplog.records) == 1 and "hot.so failed to import" in caplog.text
+    finally:
+        for name in ("accelpkg", "accelpkg.hot", "accelpkg.cold"):
+            sys.modules.pop(name, None)
+
+
+#: Where a compiled module may live: the simulator's physics and emulators, the autonomy's
+#: per-sample maths. The robot's safety path runs its sources in the tests as on the robot.
+COMPILABLE = ("firmware_like/", "ramp/simulation/backplane.py", "ramp/autonomy/perception/",
+              "ramp/autonomy/planning/follower.py", "ramp/autonomy/planning/geometry.py",
+              "ramp/autonomy/odometry.py", "ramp/autonomy/mount.py")
+
+
+def test_nothing_on_the_robots_safety_path_is_compiled() -> None:
+    modules = _build_script().MODULES
+    assert modules and all(m.startswith(COMPILABLE) for m in modules), modules
+    for path in ("ramp/scheduler.py", "ramp/hal/sabertooth.py", "ramp/runtime/buses.py",
+                 "ramp/layers/robot_distribution/interlocks.py", "ramp/layers/server/tcp.py",
+                 "ramp/layers/functional/base_drive.py"):
+        assert path not in modules
+
+
+def test_the_backend_runs_its_sources_whether_or_not_the_build_is_used() -> None:
+    import ramp.hal.sabertooth
+    import ramp.layers.robot_distribution.interlocks
+    import ramp.layers.server.tcp
+    import ramp.runtime.buses
+    import ramp.scheduler
+
+    for module in (ramp.scheduler, ramp.layers.server.tcp, ramp.hal.sabertooth,
+                   ramp.runtime.buses, ramp.layers.robot_distribution.interlocks):
+        assert module.__file__ is not None and module.__file__.endswith(".py"), module
+
+
 def _source_copy(name: str) -> ModuleType:
     """The module `name` run from its source under another name, beside its compiled self."""
     path = accel.ROOT / (name.replace(".", "/") + ".py")
