@@ -280,7 +280,7 @@ def emulated_bus(ctx: Any, bc: Any) -> dict[str, Any]:
     emulator = ODriveEmulator(channel, sorted(labels), on_velocity=on_velocity)
     ctx.add_device(emulator)
     ctx.add_service(emulator.tick)
-    ctx.emulated[bc.name] = emulator
+    ctx.add_bus_emulator(bc.name, emulator)
     logging.getLogger("ramp.sim").info("bus %s: ODrive emulators (nodes %s) on virtual CAN",
                                        bc.name, ",".join(map(str, sorted(labels))))
     return {"interface": "virtual", "channel": channel}

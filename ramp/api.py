@@ -21,6 +21,13 @@ A package extends RAMP by registering classes under entry points (SPEC 10, `ramp
 
 Only what this module exports is public; everything else in `ramp` may change without
 notice. `API_VERSION` follows semantic versioning: a plugin may check the major number.
+RAMP's own modules (`ramp.modules`) and emulators (`firmware_like`) import nothing else of
+RAMP (tests/unit/test_api.py holds them to it), so this is all a module needs.
+
+2.0 (from 1.1): MARTE's own parts left the API for MARTE's modules (`BaseDrive`,
+`round_half_away`, `ThompsonActuator`, `LIFT_FIELDS`, `POT_FIELDS`, `BucketLadder`,
+`VoltageDisplay`, `DISPLAY_FIELDS`); `RequestError` (refuse a request with a code and a
+reason) and `EmulatorContext.add_pty_device` / `add_bus_emulator` joined it.
 """
 
 from __future__ import annotations
@@ -29,7 +36,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol, TypeVar
 
-from ramp.errors import ConfigError, DeviceError
+from ramp.errors import ConfigError, DeviceError, RequestError
 from ramp.hal.interfaces import (
     KINDS,
     AnalogInput,
@@ -44,26 +51,18 @@ from ramp.hal.simio import ServoWorld, SimWorld
 from ramp.layers.functional import (
     BATTERY_FIELDS,
     BUTTON_FIELDS,
-    DISPLAY_FIELDS,
     FILTER_FIELDS,
-    LIFT_FIELDS,
     LOAD_CELL_FIELDS,
     MOTOR_FIELDS,
-    POT_FIELDS,
-    BaseDrive,
-    BucketLadder,
     Button,
     FaultLatch,
     Led,
     LoadCell,
     Motor,
     SystemVoltage,
-    ThompsonActuator,
     Voltage,
-    VoltageDisplay,
     mix,
 )
-from ramp.layers.functional.base_drive import round_half_away
 from ramp.layers.module_distribution import (
     KINDS as FUNCTION_KINDS,
 )
@@ -81,7 +80,7 @@ from ramp.mcp.params import FlagParam, FloatParam, IntParam, Param
 from ramp.schema import Block, Field, Rule
 
 #: The version of this API (semantic versioning).
-API_VERSION = "1.1"
+API_VERSION = "2.0"
 
 #: HAL channel kinds a `DeviceSpec` may name (motor, analog_in, digital_in, digital_out,
 #: bridge_in, servo).
@@ -116,15 +115,32 @@ class EmulatorContext(Protocol):
         """Channel key values -> `module.device` for the motors wired to `bus`."""
         ...
 
+    def add_pty_device(self, bus: str, device: Any) -> None:
+        """An emulated device behind a pty (RAMP's Sabertooth emulator is one): `device.link`
+        is closed at the end, `device.service(now)` reads the driver's bytes as they arrive
+        (the loop's wait watches the pty), `device.emulator.tick(now)` runs its timers, and
+        the `sim` module can unplug it (`sim:BUS.unplug=()`)."""
+        ...
+
+    def add_bus_emulator(self, bus: str, emulator: Any) -> None:
+        """Name the emulator behind `bus` (an object with `silence(bool)` lets the `sim`
+        module unplug it; tests and benchmarks reach it by the bus's name)."""
+        ...
+
 
 __all__ = [
-    "API_VERSION", "BATTERY_FIELDS", "BUTTON_FIELDS", "CHANNEL_KINDS", "DISPLAY_FIELDS",
-    "FILTER_FIELDS", "FUNCTION_KINDS", "LIFT_FIELDS", "LOAD_CELL_FIELDS", "MOTOR_FIELDS",
-    "POT_FIELDS", "BaseDrive", "BucketLadder", "FaultLatch", "Led", "LoadCell", "ThompsonActuator",
-    "VoltageDisplay",
-    "AnalogInput", "Block", "BoundDevice", "BridgeInput", "Bus", "Button", "ConfigError",
-    "DeviceError", "DeviceSpec", "DigitalInput", "DigitalOutput", "EmulatorContext", "Field",
-    "FlagParam", "FloatParam", "Function", "IntParam", "Kind", "Module", "Motor",
-    "MotorChannel", "Param", "Property", "Response", "Rule", "ServoChannel", "ServoWorld",
-    "SimWorld", "SystemVoltage", "Task", "Value", "Voltage", "mix", "round_half_away",
+    # the contract
+    "API_VERSION", "CHANNEL_KINDS", "FUNCTION_KINDS",
+    # a module: its YAML devices and settings, its MCP table, its errors
+    "Module", "DeviceSpec", "BoundDevice", "Function", "Property", "Task", "Kind",
+    "Param", "IntParam", "FloatParam", "FlagParam", "Value", "Response",
+    "Block", "Field", "Rule", "ConfigError", "DeviceError", "RequestError",
+    # a driver and the HAL channels it hands out
+    "Bus", "MotorChannel", "AnalogInput", "DigitalInput", "DigitalOutput", "BridgeInput",
+    "ServoChannel",
+    # an emulator
+    "EmulatorContext", "SimWorld", "ServoWorld",
+    # generic functional parts a module may build on
+    "Motor", "MOTOR_FIELDS", "Button", "BUTTON_FIELDS", "Voltage", "SystemVoltage",
+    "BATTERY_FIELDS", "FILTER_FIELDS", "Led", "LoadCell", "LOAD_CELL_FIELDS", "FaultLatch", "mix",
 ]

@@ -15,12 +15,16 @@ Groups:
 
 A name registered by two distributions is an error naming both, raised when that name is
 used (the other names keep working), so `ramp check` shows it at the YAML key that needs it.
+So is an entry that cannot be loaded, whatever its code raised (a missing library, a syntax
+error, an exception at import): a `PluginLoadError` naming the entry point, its distribution
+and the plugin's file and line, never a traceback.
 """
 
 from __future__ import annotations
 
 import importlib
 import importlib.metadata as md
+import traceback
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,6 +34,10 @@ _WHAT = {"ramp.modules": "module type", "ramp.drivers": "driver", "ramp.emulator
 
 class RegistryError(ValueError):
     """A name that is unknown, registered twice, or whose entry cannot be imported."""
+
+
+class PluginLoadError(RegistryError, ImportError):
+    """An entry whose code failed to import (an ImportError too: a missing vendor library)."""
 
 
 @dataclass(frozen=True)
@@ -89,7 +97,11 @@ class Registry:
             return self._loaded[name]
         e = self.entry(name)
         module_name, _, attr = e.value.partition(":")
-        obj: Any = importlib.import_module(module_name)  # ImportError: a missing library
+        try:
+            obj: Any = importlib.import_module(module_name)
+        except Exception as exc:  # a plugin's code: anything it raises is its load error
+            raise PluginLoadError(f"{self.describe(e)} cannot be loaded: {_where(exc)}"
+                                  f"{type(exc).__name__}: {exc}") from exc
         try:
             for part in attr.split(".") if attr else ():
                 obj = getattr(obj, part)
@@ -98,6 +110,22 @@ class Registry:
                                 f"{e.value}, which does not exist: {exc}") from exc
         self._loaded[name] = obj
         return obj
+
+    def describe(self, e: Entry) -> str:
+        """`module type 'arm' (entry point arm = ramp_arm.module:ArmModule of ramp-arm)`."""
+        return (f"{_WHAT.get(self.group, self.group)} {e.name!r} (entry point {e.name} = "
+                f"{e.value} in {self.group} of {e.distribution})")
+
+
+def _where(exc: BaseException) -> str:
+    """`FILE:LINE: ` of the plugin's code that raised (its innermost frame outside the import
+    machinery; a syntax error's own place), or '' when the import found no file at all."""
+    if isinstance(exc, SyntaxError) and exc.filename:
+        return f"{exc.filename}:{exc.lineno}: "
+    frames = [f for f in traceback.extract_tb(exc.__traceback__)
+              if not f.filename.startswith("<") and "importlib" not in f.filename]
+    frames = [f for f in frames if f.filename != __file__]
+    return f"{frames[-1].filename}:{frames[-1].lineno}: " if frames else ""
 
 
 def _installed(group: str) -> list[Entry]:

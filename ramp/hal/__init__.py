@@ -16,8 +16,8 @@ def driver_class(name: str) -> type[Bus]:
     packages that both registered it)."""
     cls = drivers().load(name)
     if not (isinstance(cls, type) and issubclass(cls, Bus)):
-        raise RegistryError(f"driver {name!r} ({drivers().entry(name).value}) is not a Bus "
-                            "subclass")
+        raise RegistryError(f"{drivers().describe(drivers().entry(name))} is {cls!r}, not a "
+                            "ramp.api.Bus subclass")
     return cls
 
 

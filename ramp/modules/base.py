@@ -4,7 +4,7 @@ Requests and get rows are exactly thesis tables 5.3 and 5.4 (SPEC 2.1). YAML set
 
 - `battery_filter`: `time_constant` (s, default 2.0) of the low-pass on `battery.volt`;
 - `voltage_display`: the five thresholds, `blink_hz` and `hysteresis` of the three-LED battery
-  display (sequence documented in ramp.layers.functional.voltage_display).
+  display (sequence documented in ramp.modules.voltage_display).
 """
 
 from __future__ import annotations
@@ -15,11 +15,9 @@ from typing import Any, ClassVar
 from ramp.api import (
     BATTERY_FIELDS,
     BUTTON_FIELDS,
-    DISPLAY_FIELDS,
     FILTER_FIELDS,
     MOTOR_FIELDS,
     AnalogInput,
-    BaseDrive,
     Block,
     Button,
     DeviceSpec,
@@ -38,8 +36,9 @@ from ramp.api import (
     Task,
     Value,
     Voltage,
-    VoltageDisplay,
 )
+from ramp.modules.skid_steer import BaseDrive
+from ramp.modules.voltage_display import DISPLAY_FIELDS, VoltageDisplay
 
 WHEELS = ("lf_wheel", "lb_wheel", "rf_wheel", "rb_wheel")
 DISPLAY_LEDS = ("led_high", "led_mid", "led_low")

@@ -6,7 +6,7 @@ the lift's stall fault is latched) and `lift.reset` (acknowledge it: nothing els
 SPEC 2.2). YAML settings block `lift`: `tolerance` (hold band,
 default 0.03), `hysteresis` (a move stops this close to its target, default 0.01),
 `stall_time` (s, default 1.5) and `stall_min_change` (least progress at full speed within
-`stall_time`, default 0.01); see ramp.layers.functional.thompson_actuator.
+`stall_time`, default 0.01); see ramp.modules.thompson_actuator.
 """
 
 from __future__ import annotations
@@ -15,14 +15,11 @@ from collections.abc import Mapping
 from typing import Any, ClassVar
 
 from ramp.api import (
-    LIFT_FIELDS,
     LOAD_CELL_FIELDS,
     MOTOR_FIELDS,
-    POT_FIELDS,
     AnalogInput,
     Block,
     BridgeInput,
-    BucketLadder,
     DeviceSpec,
     FloatParam,
     Function,
@@ -33,8 +30,9 @@ from ramp.api import (
     MotorChannel,
     Property,
     Task,
-    ThompsonActuator,
 )
+from ramp.modules.bucket_ladder import BucketLadder
+from ramp.modules.thompson_actuator import LIFT_FIELDS, POT_FIELDS, ThompsonActuator
 
 
 class BleModule(Module):

@@ -34,8 +34,8 @@ from ramp.api import (
     Task,
     Voltage,
     mix,
-    round_half_away,
 )
+from ramp.modules.skid_steer import round_half_away
 
 WHEELS = ("left_wheel", "right_wheel")
 BUMPERS = ("bumper_left", "bumper_right")

@@ -129,6 +129,10 @@ class SimBackplane:
         self.devices.append(device.link)
         self.sabertooth[bus] = device
 
+    def add_bus_emulator(self, bus: str, emulator: Any) -> None:
+        """The emulator behind `bus`, by name (the `sim` module's unplug, tests)."""
+        self.emulated[bus] = emulator
+
     def motor_labels(self, bus: str, *keys: str) -> dict[Any, str]:
         """Channel key values (one key: its value; several: a tuple) -> `module.device`, for
         the motors wired to `bus`."""

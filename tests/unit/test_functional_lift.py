@@ -10,7 +10,8 @@ import pytest
 
 from ramp.errors import RequestError
 from ramp.hal.interfaces import AnalogInput, BridgeInput, MotorChannel
-from ramp.layers.functional import LoadCell, Motor, ThompsonActuator
+from ramp.layers.functional import LoadCell, Motor
+from ramp.modules.thompson_actuator import ThompsonActuator
 
 V0, V1 = 0.8, 4.2  # pot volts at retracted / extended
 

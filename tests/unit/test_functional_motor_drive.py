@@ -9,8 +9,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ramp.hal.interfaces import MotorChannel
-from ramp.layers.functional import BaseDrive, BucketLadder, Motor, mix
-from ramp.layers.functional.base_drive import round_half_away
+from ramp.layers.functional import Motor, mix
+from ramp.modules.bucket_ladder import BucketLadder
+from ramp.modules.skid_steer import BaseDrive, round_half_away
 
 
 class FakeMotor(MotorChannel):

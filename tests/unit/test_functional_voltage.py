@@ -6,8 +6,8 @@ from __future__ import annotations
 import pytest
 
 from ramp.hal.interfaces import AnalogInput, DigitalInput, DigitalOutput
-from ramp.layers.functional import Button, Led, SystemVoltage, Voltage, VoltageDisplay
-from ramp.layers.functional.voltage_display import PATTERN
+from ramp.layers.functional import Button, Led, SystemVoltage, Voltage
+from ramp.modules.voltage_display import PATTERN, VoltageDisplay
 
 
 class FakeAnalog(AnalogInput):

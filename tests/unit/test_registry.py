@@ -3,6 +3,8 @@ declared like a plugin's, and a name registered twice an error naming both packa
 
 from __future__ import annotations
 
+import sys
+
 import pytest
 
 from ramp.config import parse_config
@@ -69,3 +71,65 @@ def test_an_unknown_module_type_is_a_config_error_listing_the_valid_ones() -> No
 def test_a_module_without_type_is_its_own_type() -> None:
     _, errors = parse_config("modules:\n  crane: {}\n", "r.yaml")
     assert "modules.crane.type: unknown module type 'crane'" in str(errors[0])
+
+
+@pytest.fixture
+def acme(tmp_path, monkeypatch: pytest.MonkeyPatch):  # type: ignore[no-untyped-def]
+    """A plugin distribution `acme-crane` with broken entries beside RAMP's own."""
+    import ramp.registry as registry_module
+    from ramp.registry import _installed
+
+    pkg = tmp_path / "acme_crane"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "broken.py").write_text("import math\nSPEED = 1 / 0\n")
+    (pkg / "typo.py").write_text("def f(:\n    pass\n")
+    (pkg / "notamodule.py").write_text("class Crane:\n    pass\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    fake = [Entry("crane", "acme_crane.broken:Crane", "acme-crane"),
+            Entry("typo", "acme_crane.typo:Crane", "acme-crane"),
+            Entry("plain", "acme_crane.notamodule:Crane", "acme-crane")]
+    monkeypatch.setitem(registry_module._REGISTRIES, "ramp.modules",
+                        Registry("ramp.modules", _installed("ramp.modules") + fake))
+    monkeypatch.setitem(registry_module._REGISTRIES, "ramp.drivers",
+                        Registry("ramp.drivers", _installed("ramp.drivers") + [
+                            Entry("winchbus", "acme_crane.broken:Bus", "acme-crane"),
+                            Entry("plainbus", "acme_crane.notamodule:Crane", "acme-crane")]))
+    yield pkg
+    for name in ("acme_crane", "acme_crane.broken", "acme_crane.typo", "acme_crane.notamodule"):
+        sys.modules.pop(name, None)
+
+
+def test_a_module_type_that_fails_to_import_is_a_config_error_naming_the_plugin(acme) -> None:  # type: ignore[no-untyped-def]
+    """Not a traceback out of `ramp check`: the YAML's file:line:key, the entry point, its
+    distribution, and the plugin's own file:line."""
+    _, errors = parse_config("modules:\n  m:\n    type: crane\n  t:\n    type: typo\n",
+                             "r.yaml")
+    first, second = (str(e) for e in errors)
+    assert first.startswith("r.yaml:3: modules.m.type: module type 'crane' (entry point "
+                            "crane = acme_crane.broken:Crane in ramp.modules of acme-crane) "
+                            "cannot be loaded: ")
+    assert f"{acme / 'broken.py'}:2: ZeroDivisionError" in first
+    assert second.startswith("r.yaml:5: modules.t.type: module type 'typo'")
+    assert f"{acme / 'typo.py'}:1: SyntaxError" in second
+
+
+def test_a_module_type_that_is_not_a_module_is_refused_at_registration(acme) -> None:  # type: ignore[no-untyped-def]
+    _, errors = parse_config("modules:\n  m:\n    type: plain\n", "r.yaml")
+    assert len(errors) == 1
+    text = str(errors[0])
+    assert text.startswith("r.yaml:3: modules.m.type: module type 'plain' (entry point plain = "
+                           "acme_crane.notamodule:Crane in ramp.modules of acme-crane) is ")
+    assert text.endswith("not a ramp.api.Module subclass")
+
+
+def test_a_driver_that_fails_to_load_is_a_config_error_naming_the_plugin(acme) -> None:  # type: ignore[no-untyped-def]
+    _, errors = parse_config("buses:\n  w:\n    driver: winchbus\n  p:\n    driver: plainbus\n",
+                             "r.yaml")
+    first, second = (str(e) for e in errors)
+    assert first.startswith("r.yaml:3: buses.w.driver: driver 'winchbus' (entry point "
+                            "winchbus = acme_crane.broken:Bus in ramp.drivers of acme-crane) "
+                            "cannot be loaded: ")
+    assert f"{acme / 'broken.py'}:2: ZeroDivisionError" in first
+    assert second.startswith("r.yaml:5: buses.p.driver: driver 'plainbus'")
+    assert second.endswith("not a ramp.api.Bus subclass")

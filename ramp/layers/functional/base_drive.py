@@ -1,19 +1,13 @@
-"""BaseDrive: speed + direction -> left and right wheel velocities (SPEC 2.3).
+"""mix: speed + direction -> left and right wheel velocities (SPEC 2.3).
 
 Direction 0 is straight ahead, 90 spins clockwise, 180 is straight back. A skid-steer base
-has no other degree of freedom, so one formula covers driving, pivoting and spinning.
+has no other degree of freedom, so one formula covers driving, pivoting and spinning. MARTE's
+four-wheel drive train built on it is its module's own part (ramp/modules/skid_steer.py).
 """
 
 from __future__ import annotations
 
 import math
-
-from ramp.layers.functional.motor import Motor
-
-
-def round_half_away(x: float) -> int:
-    """Round to the nearest int, halves away from zero, so +s and -s mirror exactly."""
-    return int(math.copysign(math.floor(abs(x) + 0.5), x))
 
 
 def mix(speed: float, direction_deg: float) -> tuple[float, float]:
@@ -24,32 +18,3 @@ def mix(speed: float, direction_deg: float) -> tuple[float, float]:
     left, right = c + s, c - s
     biggest = max(abs(left), abs(right))  # = |cos| + |sin| >= 1, never zero
     return speed * left / biggest, speed * right / biggest
-
-
-class BaseDrive:
-    """Four wheels of a skid-steer base; front and back of a side always get the same value."""
-
-    def __init__(self, lf: Motor, lb: Motor, rf: Motor, rb: Motor) -> None:
-        self.lf, self.lb, self.rf, self.rb = lf, lb, rf, rb
-
-    @property
-    def wheels(self) -> tuple[Motor, Motor, Motor, Motor]:
-        """In table 5.4 order: lf, lb, rf, rb."""
-        return (self.lf, self.lb, self.rf, self.rb)
-
-    def drive(self, speed: int, direction_deg: float) -> tuple[int, int]:
-        """Command the mix; returns the (left, right) ints sent to the wheels."""
-        left_f, right_f = mix(speed, direction_deg)
-        left, right = round_half_away(left_f), round_half_away(right_f)
-        self.lf.set_velocity(left)
-        self.lb.set_velocity(left)
-        self.rf.set_velocity(right)
-        self.rb.set_velocity(right)
-        return left, right
-
-    def stop(self) -> None:
-        for m in self.wheels:
-            m.stop()
-
-    def is_moving(self) -> bool:
-        return any(m.velocity != 0 for m in self.wheels)

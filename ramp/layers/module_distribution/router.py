@@ -33,6 +33,7 @@ and everything else a get reports changes only in a tick or through the robot la
 
 from __future__ import annotations
 
+import logging
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
@@ -50,6 +51,8 @@ Kind = Literal["motion", "stop", "state", "read", "control"]
 KINDS: tuple[Kind, ...] = ("motion", "stop", "state", "read", "control")
 #: What a cached answer is valid for: (ticks so far, changes outside ticks so far).
 Version = tuple[int, int]
+
+log = logging.getLogger("ramp.modules")
 
 
 @dataclass(frozen=True)
@@ -154,6 +157,7 @@ class Module(ABC):
         self._get_answer = b""
         self._rows: list[tuple[str, Callable[[], Value], str]] | None = None
         self._describe: bytes | None = None
+        self._broken_reads: set[tuple[str, str]] = set()  # properties that raised (logged)
         self.add(Function(name, "get", (), self._get, "read", "every status row",
                           line=self.get_line))
         self.add(Function(name, "stop", (), self._stop_request, "stop", "stop all motion"))
@@ -242,13 +246,27 @@ class Module(ABC):
         saturated) is an error for that row alone, so the rest still gets through."""
         out = []
         for p in self.properties:
-            value = p.read()
+            try:
+                value = p.read()
+            except Exception as exc:  # a plugin's bug costs this row, not the get
+                out.append(self._read_failed(p, exc))
+                continue
             if isinstance(value, float) and not math.isfinite(value):
                 out.append(error_response(self.name, p.device, "fault",
                                           f"no reading for {p.device}.{p.name}"))
             else:
                 out.append(Response(self.name, p.device, p.name, (value,)))
         return out
+
+    def _read_failed(self, p: Property, exc: Exception) -> Response:
+        """The error row of a property whose read raised; its traceback is logged once."""
+        if (p.device, p.name) not in self._broken_reads:
+            self._broken_reads.add((p.device, p.name))
+            log.error("module %s: reading %s.%s raised (logged once; the row answers fault "
+                      "while it raises, the other rows as usual)", self.name, p.device, p.name,
+                      exc_info=exc)
+        return error_response(self.name, p.device, "fault",
+                              f"reading {p.device}.{p.name} raised {type(exc).__name__}")
 
     def rows(self) -> list[Response]:
         """The get rows as values (what a recorder samples); `get_line` is the same on the
@@ -269,8 +287,14 @@ class Module(ABC):
                                                 f"no reading for {p.device}.{p.name}")))
                 for p in self.properties]
         parts = []
-        for prefix, read, unreadable in rows:
-            value = read()
+        for row in rows:
+            prefix, read, unreadable = row
+            try:
+                value = read()
+            except Exception as exc:  # a plugin's bug costs this row, not the get
+                failed = self._read_failed(self.properties[rows.index(row)], exc)
+                parts.append(format_response(failed))
+                continue
             if type(value) is int:
                 parts.append(f"{prefix}{value})")
             elif isinstance(value, float) and not math.isfinite(value):

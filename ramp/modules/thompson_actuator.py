@@ -23,11 +23,7 @@ import math
 from collections.abc import Mapping
 from typing import Any, Literal
 
-from ramp.errors import RequestError
-from ramp.hal.interfaces import AnalogInput
-from ramp.layers.functional.latch import FaultLatch
-from ramp.layers.functional.motor import Motor
-from ramp.schema import Block, Field, Rule
+from ramp.api import AnalogInput, Block, FaultLatch, Field, Motor, RequestError, Rule
 
 #: YAML keys of the lift's feedback pot (required: every actuator's pot sits differently).
 POT_FIELDS = Block({

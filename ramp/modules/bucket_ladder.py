@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from ramp.layers.functional.motor import Motor
+from ramp.api import Motor
 
 
 class BucketLadder:

@@ -22,8 +22,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from ramp.layers.functional.led import Led
-from ramp.schema import Block, Field, Rule
+from ramp.api import Block, Field, Led, Rule
 
 #: Settings block `voltage_display`: thresholds in rail volts (descending), blink rate, band.
 _ORDER = ("low_blink", "mid_off", "mid_blink", "high_off", "high_blink")
