@@ -144,6 +144,6 @@ __all__ = [
     # generic functional parts a module may build on
     "Motor", "MOTOR_FIELDS", "Button", "BUTTON_FIELDS", "Voltage", "SystemVoltage",
     "BATTERY_FIELDS", "FILTER_FIELDS", "Led", "LoadCell", "LOAD_CELL_FIELDS", "FaultLatch", "mix",
-    # a battery's state of charge from its voltage (the robot's battery model in YAML)
+    # a battery\'s state of charge from its voltage (the robot\'s battery model in YAML)
     "Charge",
 ]

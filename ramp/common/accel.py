@@ -12,8 +12,10 @@ in the tests as on the robot, whose service install has no build.
 the compiled modules, but only when every hashed source still matches and the build is for
 this interpreter and platform: otherwise the whole set falls back to the sources (the compiled
 modules call each other directly, so half a set would run old code). A build that is there
-but cannot be used (stale, for another platform or ABI, an extension that fails to import)
-says so in one warning (logger `ramp.accel`); no build at all, or `RAMP_ACCEL=0`, is silent.
+but cannot be used (for another platform or ABI, an extension that fails to import) says so
+in one warning (logger `ramp.accel`); a stale one in one info line (the normal state of a tree
+being edited: make rebuilds it); no build at all, or `RAMP_ACCEL=0`, is silent. `status()`
+says why either way (the mission summary and the bench report it).
 The compiled code computes what the sources compute (mission summaries were compared bit for
 bit); only the speed differs.
 
@@ -190,7 +192,10 @@ def install(build_dir: Path = BUILD_DIR, root: Path = ROOT) -> AccelStatus:
     if why:
         _status = AccelStatus(False, why)
         if (build_dir / MANIFEST).exists():  # a build that is there and cannot be used
-            log.warning("the compiled hot path cannot be used, running the sources: %s", why)
+            # Stale is the normal state of a tree being edited (make rebuilds it before the
+            # tests); one that is broken or foreign is a warning.
+            level = logging.INFO if "changed since the build" in why else logging.WARNING
+            log.log(level, "the compiled hot path cannot be used, running the sources: %s", why)
         return _status
     sys.meta_path.insert(0, CompiledFinder(files))
     modules = sorted(name for name in files if "." in name)

@@ -153,6 +153,11 @@ class SimBackplane:
         if self.wire_level and key in emulators():
             params = emulators().load(key)(self, bc)
             return driver_class(bc.driver)(bc.name, {**bc.params, **params})
+        if self.wire_level and bc.driver != "sim":
+            # Said at start, loudly: the driver's own code is not what runs under --sim.
+            log.warning("bus %s: driver %s has no emulator (no bus.%s in ramp.emulators): "
+                        "--sim replaces it by the HAL-level sim driver, so the %s driver's "
+                        "own code is not exercised", bc.name, bc.driver, bc.driver, bc.driver)
         return SimBus(bc.name, dict(bc.params), world=self.signals)
 
     def attach(self, sup: Supervisor) -> None:

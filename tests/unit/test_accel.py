@@ -247,3 +247,13 @@ def test_the_compiled_world_and_imu_give_the_sources_results_bit_for_bit() -> No
         runs.append((world.truth(), [tuple(s) for s in samples]))
     assert runs[0] == runs[1]
     assert len(runs[0][1]) == 750
+
+
+def test_a_stale_build_is_one_info_line_not_a_warning(
+        tmp_path: Path, no_finder: None, caplog: pytest.LogCaptureFixture) -> None:
+    root = _build(tmp_path)
+    (root / "pkg" / "hot.py").write_text("x = 2\n")
+    with caplog.at_level("INFO", logger="ramp.accel"):
+        status = accel.install(tmp_path / "build", root)
+    assert not status.active and "pkg/hot.py changed since the build" in status.reason
+    assert [r.levelname for r in caplog.records] == ["INFO"]

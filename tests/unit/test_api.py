@@ -142,3 +142,24 @@ def test_a_property_that_raises_costs_only_its_row_and_one_traceback(
     assert module.calls == 4
     tracebacks = [r for r in caplog.records if r.exc_info]
     assert len(tracebacks) == 1 and "gauge.broken" in tracebacks[0].getMessage()
+
+
+def test_sim_says_at_start_which_driver_it_replaces_for_want_of_an_emulator(
+        caplog: pytest.LogCaptureFixture) -> None:
+    from ramp.config import parse_config
+
+    config, errors = parse_config(
+        "buses:\n  io: {driver: phidget, serial: -1}\n  motors: {driver: sabertooth, "
+        "port: /dev/ttyUSB0}\nmodules:\n  m:\n    type: demo\n"
+        "    motor: {bus: motors, address: 128, motor: 1}\n    lamp: {bus: io, channel: 0}\n",
+        "r.yaml")
+    assert not errors and config is not None
+    backplane = SimBackplane(config)
+    try:
+        with caplog.at_level(logging.WARNING, logger="ramp"):
+            for bc in config.buses.values():
+                backplane.bus_factory(bc).close()
+    finally:
+        backplane.close()
+    warned = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warned) == 1 and warned[0].startswith("bus io: driver phidget has no emulator")
