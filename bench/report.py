@@ -82,6 +82,13 @@ def render(doc: dict[str, Any]) -> str:
             out += [f"| {name} | {v['runs']:,} | {_num(v['mean_us'])} µs | "
                     f"{_num(v['max_us'])} µs |" for name, v in tasks.items()]
             out.append("")
+    fl = doc.get("fleet")
+    if fl and "error" not in fl:
+        st = fl["stop_all_to_driving_false_ms"]
+        out += [f"**fleet** (Stop all from the page's supervisor to {fl['robots']} simulated "
+                f"agents through a local Mosquitto, {fl['rounds']} rounds): publish to every "
+                f"robot's `driving=false` p50 {_num(st['p50'])} ms, p99 {_num(st['p99'])} ms, "
+                f"max {_num(st['max'])} ms; broker CPU {fl['broker_cpu_pct']} % of a core.", ""]
     t = doc.get("tls")
     if t and "error" not in t:
         f = t["flood"]
