@@ -35,8 +35,8 @@ class AccessConfig:
     local: str = "admin"
     identities: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
     revoked: frozenset[int] = frozenset()
-    max_per_identity: int = 2
-    max_per_address: int = 4
+    max_per_identity: int = 4
+    max_per_address: int = 6
     allow_anonymous: bool = False
 
     def role_of(self, identity: str) -> str | None:

@@ -29,8 +29,8 @@ ACCESS_FIELDS = {
     "local": Field(str, "operator", choices=ROLES, what="a role for plain loopback clients"),
     "identities": Field(dict, {}, what="a mapping of certificate CN to role"),
     "revoked": Field(list, [], what="a list of certificate serials"),
-    "max_per_identity": Field(int, 2, lo=1, hi=4096, what="connections per identity"),
-    "max_per_address": Field(int, 4, lo=1, hi=4096, what="connections per remote address"),
+    "max_per_identity": Field(int, 4, lo=1, hi=4096, what="connections per identity"),
+    "max_per_address": Field(int, 6, lo=1, hi=4096, what="connections per remote address"),
     "allow_anonymous": Field(bool, False),
 }
 TLS_FIELDS = {
