@@ -6,9 +6,11 @@ A client that connects and closes in a loop made `ramp run` write 1,140 WARNING 
 `RepeatFilter` on the console handler lets the first `burst` lines of a kind through in each
 `window`, counts the rest, and says how many it held back on the next line of that kind
 that passes (`... (1,135 more like this in the last 10 s not shown)`). A kind is the logger
-and the message's template (`client %s connected`), not its text: the peers differ, the
-fact does not. The flight recorder's handler sees every line (it is not behind this
-filter), so nothing is lost to a later `ramp log summary`.
+and the message's text with its numbers masked: the peers and counts differ, the fact does
+not (`client 127.0.0.1:41234 connected (3 of 8)`), while two facts one template can say stay
+apart (`disconnected: closed by client` is not `disconnected: not reading its responses`).
+The flight recorder's handler sees every line (it is not behind this filter), so nothing is
+lost to a later `ramp log summary`.
 
 The window is measured in the record's wall time (`record.created`): logging is no control
 work, and what a reader sees on a terminal is wall time.
@@ -17,7 +19,10 @@ work, and what a reader sees on a terminal is wall time.
 from __future__ import annotations
 
 import logging
+import re
 from dataclasses import dataclass
+
+_DIGITS = re.compile(r"\d+")
 
 #: Lines of one kind let through in each window.
 BURST = 5
@@ -47,7 +52,7 @@ class RepeatFilter(logging.Filter):
     def filter(self, record: logging.LogRecord) -> bool:
         if record.levelno >= logging.CRITICAL:
             return True
-        key = (record.name, record.levelno, str(record.msg))
+        key = (record.name, record.levelno, _DIGITS.sub("#", record.getMessage()))
         now = record.created
         kind = self._kinds.get(key)
         if kind is None or now - kind.start >= self.window:
