@@ -217,7 +217,10 @@ class RobotDistribution:
                 if audit is not None:
                     audit(ctx.client, req, "forbidden", ctx.now)
                 return _error(req, "forbidden", refusal)
-        if (kind == "motion" or kind == "state") and not self.control.may_command(ctx.client):
+        # The simulated world's module (`sim`, outside the registry) is exempt: a trainer's
+        # fault acts on the world, not the robot (SPEC 12), while the autonomy holds control.
+        if (kind == "motion" or kind == "state") and not self.control.may_command(ctx.client) \
+                and module not in self.extra:
             if audit is not None:
                 audit(ctx.client, req, "not_owner", ctx.now)
             return _error(req, "not_owner", f"control is held by {self.control.owner_name}")
