@@ -31,7 +31,7 @@ from ramp.layers.robot_distribution import (
 )
 from ramp.layers.server import McpServer
 from ramp.modules import module_class
-from ramp.runtime.buses import BusManager
+from ramp.runtime.buses import BusManager, zeroer
 from ramp.runtime.observers import Observer, fan_out, overridden
 from ramp.runtime.supervisor import Supervisor
 from ramp.scheduler import Scheduler
@@ -70,7 +70,8 @@ def build(config: Config, clock: Clock | None = None, bus_factory: BusFactory | 
         }
         module: Module = module_class(mc.type)(name, devices, mc.settings)
         used = tuple(sorted({dc.bus for dc in mc.devices.values()}))
-        slots[name] = ModuleSlot(name, module, used)
+        slot = slots[name] = ModuleSlot(name, module, used)
+        slot.zero = zeroer([d.channel for d in devices.values()])
     registry = ModuleRegistry(slots)
 
     # The layers call back into the supervisor, which is made last (it holds them all).

@@ -23,7 +23,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 from ramp.errors import DeviceError
-from ramp.hal.interfaces import Bus
+from ramp.hal.interfaces import Bus, MotorChannel, ServoChannel
 from ramp.runtime.bus_opener import BusOpener
 from ramp.scheduler import Scheduler
 
@@ -44,6 +44,28 @@ class BusHealth:
     faults: int = 0
     #: Driver bugs already logged with their traceback: (exception type, message).
     bugs: set[tuple[str, str]] = field(default_factory=set)
+
+
+def zeroer(channels: list[object]) -> Callable[[], None]:
+    """What stops one module's motion on the wire, whatever its own code does (SPEC 2.2:
+    plugin code is untrusted): zero on each of its motor channels, its servos held where
+    they are, written by the bus layer. A driver that raises on it faults its bus (whose
+    close writes zeros to every motor it drives)."""
+    motors = [c for c in channels if isinstance(c, MotorChannel)]
+    servos = [c for c in channels if isinstance(c, ServoChannel)]
+
+    def zero() -> None:
+        for m in motors:
+            bus = m.bus
+            if bus is None:
+                m.duty = 0.0
+                m._apply(0.0)
+            else:
+                bus.command_motor(m, 0.0)
+        for sv in servos:
+            sv.hold()
+
+    return zero
 
 
 class BusManager:

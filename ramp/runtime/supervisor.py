@@ -9,6 +9,7 @@ layers: start and settle, shutdown, a stalled loop, the stall guard's last resor
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -24,7 +25,7 @@ from ramp.layers.robot_distribution import (
 )
 from ramp.layers.server import McpServer
 from ramp.mcp.messages import Response
-from ramp.runtime.buses import RETRY_PERIOD, BusManager
+from ramp.runtime.buses import BusManager
 from ramp.runtime.observers import Observer
 from ramp.runtime.stall_guard import StallGuard
 from ramp.scheduler import Scheduler
@@ -107,7 +108,15 @@ class Supervisor:
         sched.add_task("hotplug", self._divisor_rate(1.0), self.bus_manager.retry)
         sched.add_task("modules.retry", self._divisor_rate(1.0), self._retry_modules)
         for slot in self.slots.values():
-            for task in slot.module.tasks():
+            try:
+                tasks = slot.module.tasks()
+            except Exception as exc:  # noqa: BLE001 - plugin code: that module's fault
+                # A module without its periodic work (a controller, a stall guard) must not
+                # run at all: faulted for good.
+                self.robot.plugin_bug(slot, "tasks", exc, now)
+                slot.retry_at = math.inf
+                continue
+            for task in tasks:
                 rate = self._divisor_rate(task.rate_hz)
                 if abs(rate - task.rate_hz) > 1e-9:
                     log.info("task %s.%s runs at %g Hz (asked %g Hz; base rate %g Hz)",
@@ -209,24 +218,18 @@ class Supervisor:
         return task
 
     def module_bug(self, slot: ModuleSlot, task: str, exc: Exception, now: float) -> None:
-        """A module's task raised: the module goes to `fault` (its motion stopped), the
-        traceback is logged once per bug, and it is attached again after RETRY_PERIOD, as a
-        bus is retried; the rest of the robot keeps running."""
-        key = (task, type(exc).__name__, str(exc))
-        if key not in slot.bugs:
-            slot.bugs.add(key)
-            log.error("module %s: task %s raised; the module is faulted and retried every "
-                      "%.0f s, the rest keep running", slot.name, task, RETRY_PERIOD,
-                      exc_info=exc)
-        slot.retry_at = now + RETRY_PERIOD
-        self.robot.changes += 1
-        slot.fail(now, f"task {task} raised {type(exc).__name__}: {exc}".rstrip(": "))
-        if not self.robot.any_moving():
+        """A module's task raised: the module goes to `fault` (its motors zeroed on the
+        wire), the traceback is logged once per fault episode, and it is attached again after
+        RETRY_PERIOD, as a bus is retried; the rest of the robot keeps running."""
+        self.robot.plugin_bug(slot, f"task {task}", exc, now)
+        if not self.robot.any_moving(now):
             self.robot.watchdog.disarm(now)
 
     def _retry_modules(self, now: float, dt: float) -> None:
-        """About once a second: attach again a module whose task raised, once its wait is
-        over (its buses permitting)."""
+        """About once a second: attach again a module whose code raised, once its wait is
+        over (its buses permitting); end the fault episodes of modules running clean."""
+        for slot in self.slots.values():
+            slot.quiet(now)
         if any(s.state != "ok" and s.retry_at and now >= s.retry_at
                for s in self.slots.values()):
             self.buses_changed(now)

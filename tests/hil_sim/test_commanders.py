@@ -149,9 +149,12 @@ def test_commanders_row_counts_the_clients_that_must_talk(h: SimHarness) -> None
     assert value(b.ask("robot:robot.get=()"), "robot:watchdog.commanders") == "1"
     assert b.ask("ble:chain.vel=(20)") == ""
     assert value(b.ask("robot:robot.get=()"), "robot:watchdog.commanders") == "2"
-    # A commands the BLE now (the module's commander is replaced): B's chain runs on A's
-    # messages, and B need not talk any more.
+    # A commands the BLE's lift now: commanders are per device (SPEC 2.2, issue 33), so B
+    # still commands the chain it set moving and must keep talking.
     assert a.ask("ble:lift.vel=(20)") == ""
+    assert value(b.ask("robot:robot.get=()"), "robot:watchdog.commanders") == "2"
+    # A takes the chain too: now B commands nothing and need not talk.
+    assert a.ask("ble:chain.vel=(30)") == ""
     assert value(b.ask("robot:robot.get=()"), "robot:watchdog.commanders") == "1"
     assert b.ask("robot:robot.stop=()") == ""
     assert value(b.ask("robot:robot.get=()"), "robot:watchdog.commanders") == "0"
@@ -194,3 +197,59 @@ def test_every_commander_of_a_moving_module_keeps_its_slot() -> None:
         assert "robot:watchdog.state=(armed)" in talker.ask("robot:robot.get=()")
     finally:
         h.close()
+
+
+# -- commanders per device, not per module (issue 33 item 2) ---------------------------------
+
+def test_a_second_client_touching_one_wheel_never_takes_over_the_other_three(
+        h: SimHarness) -> None:
+    """The issue's reproduction: A drives, B sets one wheel to 30 and keeps heartbeating; A
+    disconnects. Before: B had replaced A as the base's commander and three wheels kept A's
+    60 %. Now A still commands the three wheels B did not touch: its loss stops everything."""
+    a, b = h.connect(), h.connect()
+    assert a.ask("base:base.drive=(60,0)") == ""
+    assert b.ask("base:lf_wheel.vel=(30)") == ""
+    poll_for(h, [a, b], 0.3, ask="")
+    assert value(b.ask("robot:robot.get=()"), "robot:watchdog.commanders") == "2"
+    a.close()
+    poll_for(h, [b], 0.2, ask="")
+    assert base_wire(h) == [0.0] * 4
+    assert value(b.ask("robot:robot.get=()"), "robot:watchdog.state") == "tripped"
+
+
+def test_a_zero_speed_request_never_makes_its_sender_the_commander(h: SimHarness) -> None:
+    """The issue's second reproduction: B's `lf_wheel.vel=(0)` with a 60 s timeout kept A's
+    three wheels at 60 % for B's 60 s after A vanished. A zero speed is a stop: A stays the
+    commander, and A's silence trips the watchdog after A's own 1 s."""
+    a, b = h.connect(), h.connect()
+    assert b.ask("robot:watchdog.timeout=(60)") == ""
+    assert a.ask("base:base.drive=(60,0)") == ""
+    assert b.ask("base:lf_wheel.vel=(0)") == ""
+    assert value(b.ask("robot:robot.get=()"), "robot:watchdog.commanders") == "1"
+    poll_for(h, [b], 0.6, ask="")
+    assert base_wire(h)[1:] != [0.0] * 3  # A's three wheels still run on A's 1 s
+    poll_for(h, [b], 0.6, ask="")
+    assert base_wire(h) == [0.0] * 4
+    assert value(b.ask("robot:robot.get=()"), "robot:watchdog.state") == "tripped"
+
+
+def test_a_zero_speed_request_with_a_disconnect_trips_too(h: SimHarness) -> None:
+    a, b = h.connect(), h.connect()
+    assert a.ask("base:base.drive=(60,0)") == ""
+    assert b.ask("base:lf_wheel.vel=(0)") == ""
+    a.close()
+    poll_for(h, [b], 0.1, ask="")
+    assert base_wire(h) == [0.0] * 4
+
+
+def test_a_refused_motion_request_commands_nothing(h: SimHarness) -> None:
+    """A request armed before the module's code runs, then refused by it (a latched lift),
+    leaves the watchdog as it was: its sender need not talk."""
+    a, b = h.connect(), h.connect()
+    h.sup.slots["ble"].module.lift.latch.trip("lift stalled: test")
+    assert a.ask("base:base.drive=(40,0)") == ""
+    assert b.ask("ble:lift.vel=(50)").startswith("ble:lift.error=(fault,")
+    assert value(b.ask("robot:robot.get=()"), "robot:watchdog.commanders") == "1"
+    poll_for(h, [a], 1.5, ask="")  # B silent: nothing of its moves
+    assert value(a.ask("robot:robot.get=()"), "robot:watchdog.state") == "armed"
+    assert all(d != 0 for d in base_wire(h))

@@ -31,7 +31,7 @@ from ramp.layers.module_distribution.router import Version, answer
 from ramp.layers.robot_distribution.access import forbidden
 from ramp.layers.robot_distribution.context import Client, RequestContext
 from ramp.layers.robot_distribution.control import Control
-from ramp.layers.robot_distribution.interlocks import Interlocks
+from ramp.layers.robot_distribution.interlocks import Interlocks, speed_param
 from ramp.layers.robot_distribution.registry import ModuleRegistry, ModuleSlot
 from ramp.layers.robot_distribution.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S, Watchdog
 from ramp.mcp.messages import Request, Response, Value, error_response
@@ -171,6 +171,9 @@ class RobotDistribution:
         self.access_mode: str | None = None
         #: Observer hook (the flight recorder's audit): None costs nothing.
         self.on_audit: AuditHook | None = None
+        #: Clock time of the last tick or request: when a plugin bug met outside both is
+        #: dated.
+        self.now = 0.0
 
     @property
     def version(self) -> Version:
@@ -181,11 +184,13 @@ class RobotDistribution:
         """A complete message arrived (any message: heartbeat, erroneous or too long): its
         sender has been heard, which is what the watchdog asks of a commander (each client
         for itself), before its requests are handled."""
-        ctx.client.last_heard = ctx.now
+        ctx.client.last_heard = self.now = ctx.now
 
     def request(self, ctx: RequestContext, req: Request) -> bytes:
         """One request: its answer as it goes on the wire (b"" for an accepted action)."""
         module = req.module
+        slot: ModuleSlot | None = None
+        world = False  # a `sim:` request: the world's doing, not the robot's (SPEC 12)
         if module == "robot":
             target: Module = self.robot
         else:
@@ -194,6 +199,7 @@ class RobotDistribution:
                 target = slot.module
             elif slot is None and module in self.extra:
                 target = self.extra[module]
+                world = True
             else:
                 return self._unusable(req, slot)
         fn = target.functions.get((req.device, req.function))
@@ -232,24 +238,42 @@ class RobotDistribution:
                     audit(ctx.client, req, "interlocked", ctx.now)
                 return _error(req, "interlocked", refusal)
         self.changes += 1
+        watchdog = self.watchdog
+        armed = None
+        stops = kind == "stop"
+        if kind == "motion" and not world:
+            # A zero speed is a stop: its sender commands nothing. Any other motion makes
+            # its sender the device's commander and arms the watchdog before the module's
+            # code runs (SPEC 2.2): a plugin that raises half-way has armed it all the same.
+            sp = speed_param(fn)
+            if sp is not None and values[0] == 0:
+                stops = True
+            else:
+                armed = watchdog.command(module, fn.device, ctx.client, ctx.now)
         try:
             result = fn.run(ctx, *values) if fn.takes_context else fn.run(*values)
         except RequestError as exc:
+            if armed is not None:
+                watchdog.undo(armed, ctx.now)
             if audit is not None:
                 audit(ctx.client, req, exc.code, ctx.now)
             return _error(req, exc.code, exc.detail)
-        except Exception as exc:
-            log.exception("request %s:%s.%s failed", req.module, req.device, req.function)
-            if kind == "motion":  # it may have started some motors with the watchdog idle
-                self._stop(target, "a failed motion request")
+        except Exception as exc:  # noqa: BLE001 - plugin code: that module's fault
+            if slot is None:
+                log.exception("request %s:%s.%s failed", req.module, req.device, req.function)
+            else:
+                self.plugin_bug(slot, f"{req.device}.{req.function}", exc, ctx.now)
+            if kind == "motion":
                 interlocks.forget(module)
             return _error(req, "fault", f"internal error {type(exc).__name__}")
         if interlocks.rules and (kind == "motion" or kind == "stop"):
             interlocks.ran(module, fn, values)
-        if kind == "motion":
-            self.watchdog.command(module, ctx.client, ctx.now, self.any_moving())
-        elif kind == "stop" and not self.any_moving():
-            self.watchdog.disarm(ctx.now)
+        if stops:
+            watchdog.stopped(module, fn.device)
+        if kind == "motion" and not world:
+            watchdog.settle(ctx.now, self.any_moving(ctx.now))
+        elif kind == "stop" and not self.any_moving(ctx.now):
+            watchdog.disarm(ctx.now)
         if audit is not None:
             audit(ctx.client, req, "accepted", ctx.now)
         return answer(result) if result else b""
@@ -326,13 +350,33 @@ class RobotDistribution:
             self.on_control(self.control.owner_name, client.peer, now)
 
     # -- robot-wide safety --------------------------------------------------------------------
-    def any_moving(self) -> bool:
-        return any(s.state == "ok" and s.module.is_moving() for s in self.slots.values())
+    def any_moving(self, now: float | None = None) -> bool:
+        """Any attached module moving. A module whose `is_moving` raises goes to `fault`
+        (its motors zeroed by the bus layer) and moves no more."""
+        moving = False
+        for slot in self.slots.values():
+            if slot.state == "ok" and self._is_moving(slot, now):
+                moving = True
+        return moving
 
     def moving(self, module: str) -> bool:
-        """The module is attached and moving (its commander must keep talking)."""
+        """The module is attached and moving (its commanders must keep talking)."""
         slot = self.slots.get(module)
-        return slot is not None and slot.state == "ok" and slot.module.is_moving()
+        return slot is not None and slot.state == "ok" and self._is_moving(slot, None)
+
+    def _is_moving(self, slot: ModuleSlot, now: float | None) -> bool:
+        try:
+            return bool(slot.module.is_moving())
+        except Exception as exc:  # noqa: BLE001 - plugin code on the safety path
+            self.plugin_bug(slot, "is_moving", exc, self.now if now is None else now)
+            return False
+
+    def plugin_bug(self, slot: ModuleSlot, where: str, exc: Exception, now: float) -> None:
+        """Plugin code of `slot`'s module raised on the safety path (SPEC 2.2): the module
+        goes to `fault`, its motors zeroed by the bus layer (never trusting its own stop),
+        one traceback per fault episode; the rest keep running."""
+        self.changes += 1
+        slot.plugin_bug(where, exc, now)
 
     def stop_all(self, reason: str, now: float = 0.0) -> None:
         """Every attached module stops all motion; nothing is left for the watchdog."""
@@ -342,6 +386,7 @@ class RobotDistribution:
     def tick(self, now: float, dt: float) -> None:
         """Scheduler task: is any commander of a moving module late? Then everything stops."""
         watchdog = self.watchdog
+        self.now = now
         if watchdog.state != "armed":
             return
         late = watchdog.late(now, self.moving)
@@ -384,19 +429,21 @@ class RobotDistribution:
         self._stop_keep_trip(reason)
 
     def _stop_keep_trip(self, reason: str) -> None:
-        """Every attached module stops; the watchdog state is left to the caller."""
+        """Every attached module stops; the watchdog state is left to the caller. Its
+        motors are zeroed on the wire by the bus layer as well: a module's own `stop` is
+        plugin code, and a stop it cannot complete must not leave a motor running."""
         self.changes += 1
         self.interlocks.stopped_all()  # a limit never re-runs what this stops
         for slot in self.slots.values():
             if slot.state == "ok":
-                self._stop(slot.module, reason)
+                self._stop_slot(slot, reason)
 
-    @staticmethod
-    def _stop(module: Module, reason: str) -> None:
+    def _stop_slot(self, slot: ModuleSlot, reason: str) -> None:
         try:
-            module.stop()
-        except Exception:
-            log.exception("module %s failed to stop (%s)", module.name, reason)
+            slot.module.stop()
+        except Exception as exc:  # noqa: BLE001 - plugin code: that module's fault
+            self.plugin_bug(slot, f"stop ({reason})", exc, self.now)
+        slot.zero()
 
     # -- health -------------------------------------------------------------------------------
     def health_rows_for(self, ctx: RequestContext) -> list[Response]:
