@@ -253,3 +253,34 @@ def test_a_refused_motion_request_commands_nothing(h: SimHarness) -> None:
     poll_for(h, [a], 1.5, ask="")  # B silent: nothing of its moves
     assert value(a.ask("robot:robot.get=()"), "robot:watchdog.state") == "armed"
     assert all(d != 0 for d in base_wire(h))
+
+
+@pytest.mark.parametrize("method", ["is_moving", "stop"])
+def test_a_module_whose_code_raises_is_stopped_on_the_wire(method: str) -> None:
+    """Plugin code on the safety path (SPEC 2.2): a module whose `is_moving` or `stop`
+    raises goes to `fault` and its motors are zeroed by the bus layer, and the client that
+    drove it stays the commander, so its loss trips the watchdog."""
+    from tests.harness import Harness
+
+    h = Harness()
+    try:
+        driver = h.connect()
+        assert driver.ask("demo:motor.vel=(50)") == ""
+        h.advance(0.05)
+        assert h.world.motors["demo.motor"] != 0.0
+        module = h.sup.slots["demo"].module
+
+        def broken(*args: object) -> bool:
+            raise RuntimeError(f"{method} is broken")
+
+        setattr(module, method, broken)
+        if method == "stop":
+            assert driver.ask("robot:robot.stop=()") == ""
+        else:
+            assert driver.ask("arm:motor.vel=(10)") == ""  # asks every module if it moves
+        h.advance(0.05)
+        assert h.sup.slots["demo"].state == "fault"
+        assert h.world.motors["demo.motor"] == 0.0
+        assert h.sup.slots["arm"].state == "ok"
+    finally:
+        h.close()
