@@ -149,7 +149,7 @@ class LocalBroker:
                 if accepts(self.host, port):
                     self.proc, self.port = proc, port
                     return self
-                time.sleep(0.02)
+                time.sleep(0.02)  # start-up of a child process, not control work
             if proc.poll() is None:
                 proc.kill()
             _, err = proc.communicate(timeout=5)

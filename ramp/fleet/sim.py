@@ -142,7 +142,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
             for p in dead:  # a crashed agent is the fleet's business: say so, carry on
                 print(f"ramp fleet: {p.name} exited ({p.popen.returncode})", flush=True)
                 (robots if p in robots else others).remove(p)
-            time.sleep(0.2)
+            time.sleep(0.2)  # a supervisor of processes, no control work: it only watches
     except KeyboardInterrupt:
         pass
     except RuntimeError as exc:
