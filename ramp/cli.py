@@ -3,14 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import gc
 import logging
 import os
 import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from types import FrameType
 from typing import TYPE_CHECKING
 
 from ramp import __version__
@@ -24,8 +22,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("ramp")
 
-#: Signals that stop every motor (zeros on the wire), then end `ramp run` with status 0.
-STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP, signal.SIGQUIT)
 
 
 class JournalFormatter(logging.Formatter):
@@ -116,14 +112,17 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | None,
-                   observer: Observer | None = None, record: str | None = None) -> int:
-    """Build, start and run until a stop signal; motors are stopped before returning.
-    `observer` (see `ramp.runtime.observers`) watches the running supervisor; `record`
-    (`--record DIR`) records the run there, over the config's `recorder: dir`."""
+                   observer: Observer | None = None, record: str | None = None,
+                   rt_priority: int | None = None) -> int:
+    """Build, start and run until a stop signal, as the service runs
+    (`ramp.runtime.service.serve`); motors are stopped before returning. `observer` (see
+    `ramp.runtime.observers`) watches the running supervisor; `record` (`--record DIR`)
+    records the run there, over the config's `recorder: dir`; `rt_priority`: SCHED_FIFO at
+    this priority where permitted (None: as started; the systemd unit sets it)."""
     from ramp.clock import MonotonicClock
     from ramp.runtime import build
     from ramp.runtime.recording import recorder_for
-    from ramp.runtime.systemd import SystemdNotifier
+    from ramp.runtime.service import STOP_SIGNALS, ServiceState, serve
 
     clock = MonotonicClock()
     backplane = None
@@ -154,16 +153,6 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
         else:  # a bug: its traceback helps whoever reads the log
             log.exception("cannot build the supervisor from %s", config.file)
         return 1
-    notifier = SystemdNotifier()
-
-    def on_signal(signum: int, frame: FrameType | None) -> None:
-        log.info("%s received: stopping every motor and exiting", signal.Signals(signum).name)
-        sup.scheduler.stop()
-
-    # SIGHUP (the terminal or SSH session went away) and SIGQUIT (Ctrl-backslash) used to end
-    # the process with the motors still commanded: every one of them stops the robot first.
-    for signum in STOP_SIGNALS:
-        signal.signal(signum, on_signal)
     reloader = None
     if config.access.configured or config.server.tls is not None:
         # A deployed robot (SPEC 13): SIGHUP reloads `access` (systemd's ExecReload), as
@@ -171,44 +160,27 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
         from ramp.runtime.access_reload import AccessReloader
 
         reloader = AccessReloader(sup, config.file)
-        reloader.install()
-    try:
-        sup.start()
-    except Exception as exc:  # noqa: BLE001 - whatever failed, the motors must be stopped
-        if isinstance(exc, OSError):
-            log.error("cannot serve on %s: %s",
-                      format_hostport(sup.server.host, sup.server.port), exc.strerror)
-        else:
-            log.exception("start-up failed")
-        sup.shutdown()
-        if backplane is not None:
-            backplane.close()
-        return 1
-    guard = sup.stall_guard
-    guard.start()
-    notifier.attach(sup)
-    sup.settle()
-    # Everything built so far lives as long as the process: take it out of the garbage
-    # collector's full passes, which would otherwise walk it (7 ms here) in the middle of a
-    # tick now and then.
-    gc.freeze()
-    if not sup.scheduler.stopping:  # a signal during start-up: never announce ready
+
+    def announce(state: ServiceState) -> None:
         h, p = sup.server.address
         # an IPv6 address in brackets (`[::1]:5577`), as ramp-shell and every client take it
         print(f"ramp: ready on {format_hostport(h, p)}", flush=True)
-        notifier.ready(f"serving on {format_hostport(h, p)}")
-    try:
-        sup.scheduler.run()
-    finally:
-        notifier.stopping()
-        guard.stop()
+
+    def closed() -> None:
         if reloader is not None:
             reloader.close()
-        sup.shutdown()
         if backplane is not None:
             backplane.close()
+
+    stop_signals: tuple[signal.Signals, ...] = STOP_SIGNALS
+    if reloader is not None:  # SIGHUP is the reloader's
+        stop_signals = tuple(s for s in STOP_SIGNALS if s != signal.SIGHUP)
+        reloader.install()
+    code = serve(sup, ready=announce, rt_priority=rt_priority, stop_signals=stop_signals,
+                 on_stop=closed)
+    if code == 0:
         log.info("stopped: every motor commanded to zero")
-    return 0
+    return code
 
 
 def port_number(text: str) -> int:

@@ -55,6 +55,11 @@ class StallGuard:
         self._thread = threading.Thread(target=self._watch, name="ramp-stall-guard", daemon=True)
         self._thread.start()
 
+    @property
+    def running(self) -> bool:
+        """Whether the guard's thread is watching the loop."""
+        return self._thread is not None and self._thread.is_alive()
+
     def stop(self) -> None:
         self._stop.set()
         if self._thread is not None:
