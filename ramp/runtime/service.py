@@ -29,7 +29,8 @@ if TYPE_CHECKING:
 log = logging.getLogger("ramp")
 
 #: Signals that stop every motor (zeros on the wire), then end the service with status 0.
-STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP, signal.SIGQUIT)
+STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP,
+                                            signal.SIGQUIT)
 #: `CPUSchedulingPriority` of `scripts/ramp.service` (SCHED_FIFO): the tick loop's priority
 #: on the robot.
 SERVICE_RT_PRIORITY = 20
@@ -71,11 +72,12 @@ def scheduling_priority(priority: int | None) -> str:
 def serve(sup: Supervisor, *, ready: Callable[[ServiceState], None],
           until: Callable[[], bool] | None = None, rt_priority: int | None = None,
           stop_signals: tuple[signal.Signals, ...] = STOP_SIGNALS,
-          on_stop: Callable[[], None] | None = None) -> int:
+          on_stop: Callable[[], None] | None = None,
+          on_start_failed: Callable[[Exception], None] | None = None) -> int:
     """Start `sup` and run it as the robot's service until a stop signal (or `until()`);
     every motor is stopped before this returns. `ready(state)` announces it once it serves
     (never after a stop signal during start-up). `on_stop` runs after the shutdown, even on
-    a failed start. 0, or 1 when it could not start."""
+    a failed start, after `on_start_failed(exc)`. 0, or 1 when it could not start."""
     from ramp.runtime.systemd import SystemdNotifier
 
     state = ServiceState()
@@ -99,6 +101,8 @@ def serve(sup: Supervisor, *, ready: Callable[[ServiceState], None],
         else:
             log.exception("start-up failed")
         sup.shutdown()
+        if on_start_failed is not None:
+            on_start_failed(exc)
         if on_stop is not None:
             on_stop()
         return 1

@@ -1,33 +1,49 @@
-"""`ramp sim mission --realtime`: the robot and the arena in a process of their own.
+"""`ramp sim mission --realtime`: the robot's backend, the simulated hardware and the autonomy
+in three processes, as on the robot.
 
-On the robot the backend and the autonomy are separate processes on separate loops; in one
-process on one loop, the autonomy's heavy work (a 3D scan's detection, a localization, a
-plan: tens to hundreds of milliseconds) made the backend's 100 Hz tick late by as much and
-stalled it past its limit (issue 23). So on the wall clock the simulator runs here, in a
-child process on its own scheduler and `MonotonicClock` -- the world, the backend (a real
-`Supervisor` whose sim backplane steps the world, serving MCP on its port), the Hokuyo
-emulator on loopback TCP, the IMU and gimbal emulators (`ramp.simulation.rig.SimSensors`)
-and the `sim` module -- and the parent (`ramp.simulation.mission.MissionRun`) keeps the
-autonomy exactly as `ramp-autonomy` runs it on the robot, with the trace, the summary and
-the observers. The virtual-time run stays one process on one scheduler, deterministic.
+On the robot the backend and the autonomy are separate processes on separate loops, and the
+hardware is hardware; in one process on one loop, the autonomy's heavy work (a 3D scan's
+detection, a localization, a plan: tens to hundreds of milliseconds) made the backend's
+100 Hz tick late by as much (issue 23), and the world's physics, the LIDAR's ray casting and
+the emulators on the backend's loop made its figures the simulator's, not the robot's
+(issue 35). So on the wall clock:
 
-Between them: MCP over TCP and SCIP over TCP, as on the robot, and the **sensor link**
-(`ramp.autonomy.hal.simlink`), a socketpair serviced as a reader on each side's loop,
-carrying
+- **the simulator's process** (this module's `Arena`, a child of the command's process, on
+  its own scheduler and `MonotonicClock`): the world and its physics, the Sabertooth
+  emulators behind their ptys (`SimBackplane`'s bus emulators, built here; the backplane is
+  stepped here, never attached to a supervisor), the Hokuyo emulator on loopback TCP, the IMU
+  and gimbal emulators (`ramp.simulation.rig.SimSensors`);
+- **the backend's process** (`ramp.simulation.backend_process`, started by the simulator's):
+  the supervisor run exactly as `ramp run` runs it (`ramp.runtime.service.serve`: the stall
+  guard's thread, `gc.freeze()`, SCHED_FIFO where permitted), its Sabertooth drivers on the
+  simulator's ptys, the Phidget boards (which cannot cross a process at the wire) on the
+  HAL-level sim driver fed over the **hardware link**, and the `sim` module, whose
+  injections go to the simulator over the same link;
+- **the command's process** (`ramp.simulation.mission.MissionRun`): the autonomy exactly as
+  `ramp-autonomy` runs it on the robot, with the trace, the summary and the observers. The
+  virtual-time run stays one process on one scheduler, deterministic.
+
+Between the autonomy and the others: MCP over TCP to the backend and SCIP over TCP to the
+Hokuyo, as on the robot, and the **sensor link** (`ramp.autonomy.hal.simlink`), a
+socketpair serviced as a reader on each side's loop, carrying
 
 - the IMU emulator's samples and the gimbal emulator's positions and target-reached events
   to the autonomy's `SimLinkImu` / `SimLinkPanTilt` drivers, and their commands back
   (`SensorServer`);
-- `ready` (the MCP address, the Hokuyo's, the child's pid) once the child serves, `truth`
-  at 10 Hz (the world's t, x, y, yaw, lift, bin, delivered, the referee's counts and logs)
-  for the trace and the observers (`MirroredWorld`), and `end` (the same, and the backend's
-  tick lateness over the whole run, `TickLog`) when the parent says `stop`.
+- `ready` (the backend's MCP address and pid and how it runs, the Hokuyo's address, the
+  child's pid) once the backend serves, `truth` at 10 Hz (the world's t, x, y, yaw, lift,
+  bin, delivered, the referee's counts and logs) for the trace and the observers
+  (`MirroredWorld`), and `end` (the same, the backend's tick lateness over the whole run as
+  its process measured it, `TickLog`, and the simulator's own) when the parent says `stop`.
 
 Lifetime: the child runs until the parent says `stop` or the link closes (the parent died:
-its end of the socketpair closes with it), then sends `end`, stops every motor
-(`Supervisor.shutdown`) and closes its ports. It starts in a session of its own, so a Ctrl-C
-in the terminal reaches only the parent, which stops the robot and ends the child; a child
-that dies closes the link and the parent ends the run as `error`, saying so.
+its end of the socketpair closes with it), or the backend's process ends; then it tells the
+backend to stop (every motor zeroed on the wires, read here as the bytes arrive), sends
+`end`, and closes its ports. It starts in a session of its own (the backend in the same),
+so a Ctrl-C in the terminal reaches only the parent, which stops the robot and ends the
+child; a child that dies closes both links, so the backend stops too and the parent ends the
+run as `error`, saying so. ODrive buses (python-can's `virtual` bus, one process's) are not
+supported here yet: the child refuses a config with a simulated CAN bus.
 
     python -m ramp.simulation.arena_process --link-fd N --options JSON   (the parent runs it)
 """
@@ -227,34 +243,62 @@ def truth_of(world: MarteWorld) -> dict[str, Any]:
             "crater_entries": world.crater_entries}
 
 
+class _SensorFaults:
+    """`SimSensors`' view of the backend: the backplane here steps the world, and the `sim`
+    module's sensor faults (served by the backend's process) arrive over the hardware link."""
+
+    steps_world = True
+
+    def __init__(self) -> None:
+        self.sim_module = self
+        self.blind: Callable[[bool], None] = lambda on: None
+        self.shift: Callable[[float], None] = lambda deg: None
+
+    def add_sensor_faults(self, blind: Callable[[bool], None],
+                          shift: Callable[[float], None]) -> None:
+        self.blind, self.shift = blind, shift
+
+
 class Arena:
-    """The child's whole run: the world, the backend, the sensors and the link server on
-    one scheduler and the wall clock, until `stop` or the link closes."""
+    """The simulator's whole run: the world, the emulated hardware, the sensors and the link
+    servers on one scheduler and the wall clock, and the backend in a process of its own
+    (`ramp.simulation.backend_process`) on the emulated wires, until `stop` or the link
+    closes."""
 
     def __init__(self, options: MissionOptions, link: SensorLink) -> None:
         from firmware_like.randomize import Randomization
         from ramp.clock import MonotonicClock
-        from ramp.simulation.backend import SimBackend
+        from ramp.simulation.backend import DEFAULT_RAMP_YAML, load_backend_config
+        from ramp.simulation.backplane import SimBackplane
         from ramp.simulation.mission import make_world, mission_config
         from ramp.simulation.rig import SimSensors, load_autonomy_config
 
         o = options
         self.link = link
         self.stopping = ""
+        self.backend_ready: Message | None = None
+        self.backend_end: Message | None = None
+        self.backend_failed = ""
         randomization = Randomization.draw(o.seed) if o.randomize else None
         self.world = make_world(o, randomization)
         config = mission_config(load_autonomy_config(o.config), o.duration)
-        # What is built is closed again if a later step fails: the backend stops its motors
-        # (`Supervisor.shutdown`) and frees its port, the Hokuyo emulator its own.
+        backend_config = load_backend_config(DEFAULT_RAMP_YAML)
+        self.scheduler = scheduler = Scheduler(MonotonicClock(), backend_config.rate_hz)
+        # What is built is closed again if a later step fails: the backend's process stops
+        # its motors and ends, the emulators close their ptys and ports.
         with contextlib.ExitStack() as built:
-            self.backend = SimBackend(self.world, clock=MonotonicClock(), port=o.port)
-            built.callback(self.backend.close)
-            scheduler = self.backend.scheduler
-            self.ticks = TickLog(scheduler)
+            self.backplane = SimBackplane(backend_config, self.world, wire_level=True)
+            built.callback(self.backplane.close)
+            self.ticks = TickLog(scheduler)  # the simulator's own loop, for comparison
+            wire, self.inputs = self._wire(backend_config)
+            scheduler.add_task("sim.world", scheduler.rate_hz, self._hardware_tick)
+            faults = _SensorFaults()
             self.sensors = SimSensors(self.world, config, scheduler, seed=o.seed,
                                       fault=o.fault, run_length_s=o.duration,
-                                      backend=self.backend, randomization=randomization)
+                                      backend=faults,  # type: ignore[arg-type]
+                                      randomization=randomization)
             built.callback(self.sensors.close)
+            self.faults = faults
             self.server = SensorServer(link, self.sensors.imu_emulator,
                                        self.sensors.gimbal_emulator)
             self._logged = (0, 0)
@@ -263,39 +307,185 @@ class Arena:
             link.attach(scheduler)
             scheduler.add_task("sim.link", scheduler.rate_hz, self.server.tick)
             scheduler.add_task("sim.truth", TRUTH_HZ, self._truth)
+            self._sent_inputs: dict[str, Any] = {}
+            self._sent_present: dict[str, bool] = {}
+            values, present = self._input_values()
+            self._sent_inputs, self._sent_present = dict(values), dict(present)
+            spec = {"config": str(DEFAULT_RAMP_YAML), "port": o.port, "wire": wire,
+                    "values": values, "present": present,
+                    "can_jam": hasattr(self.world, "jam_lift")}
+            if o.backend_rt_priority is not None:
+                spec["rt_priority"] = o.backend_rt_priority
+            self._start_backend(spec)
+            built.callback(self._end_backend)
+            self._wait_backend(READY_TIMEOUT_S)
             built.pop_all()
 
+    # -- the hardware the backend drives --------------------------------------------------------
+    def _wire(self, config: Any) -> tuple[dict[str, dict[str, Any]], dict[str, str]]:
+        """Each bus's emulator, built here: the params of the buses whose real driver the
+        backend opens on an emulated wire (a pty), and the inputs (label -> the `SimWorld`
+        read) of the HAL-level ones, whose values go over the hardware link."""
+        from ramp.registry import emulators
+        from ramp.simulation.backend_process import INPUT_READS
+
+        wire: dict[str, dict[str, Any]] = {}
+        for bc in config.buses.values():
+            key = f"bus.{bc.driver}"
+            if not bc.sim:
+                wire[bc.name] = {}  # the real device: the backend opens it as configured
+            elif key in emulators():
+                if bc.driver == "can":
+                    # python-can's virtual bus does not cross processes.
+                    raise ArenaError(f"bus {bc.name}: a CAN bus cannot be emulated in the "
+                                     "simulator's process yet (python-can's virtual bus is "
+                                     "one process's)")
+                wire[bc.name] = dict(emulators().load(key)(self.backplane, bc))
+        inputs = {}
+        for mname, mc in config.modules.items():
+            for dname, dc in mc.devices.items():
+                if dc.bus not in wire and dc.kind in INPUT_READS:
+                    inputs[f"{mname}.{dname}"] = INPUT_READS[dc.kind]
+        self.hal_buses = [name for name in config.buses if name not in wire]
+        return wire, inputs
+
+    def _input_values(self) -> tuple[dict[str, Any], dict[str, bool]]:
+        signals = self.backplane.signals
+        values = {label: getattr(signals, read)(label) for label, read in self.inputs.items()}
+        present = {bus: bool(signals.bus_present(bus)) for bus in self.hal_buses}
+        return values, present
+
+    def _hardware_tick(self, now: float, dt: float) -> None:
+        """The emulators read their wires, the world steps, and the HAL-level inputs that
+        changed go to the backend."""
+        self.backplane.tick(now, dt)
+        values, present = self._input_values()
+        changed = {k: v for k, v in values.items() if self._sent_inputs.get(k) != v}
+        gone = {k: v for k, v in present.items() if self._sent_present.get(k) != v}
+        if changed or gone:
+            self._sent_inputs.update(changed)
+            self._sent_present.update(gone)
+            self.hw.send("in", v=changed, present=gone)
+
+    def _out(self, msg: Message) -> None:
+        """An output or motor of a HAL-level bus, as the backend's sim driver set it."""
+        op, label, args = msg.get("op"), msg.get("label"), msg.get("args")
+        if op not in ("set_motor", "write_digital", "set_servo") or not isinstance(
+                label, str) or not isinstance(args, list):
+            raise ValueError(f"hardware link: a bad output {msg!r:.80}")
+        getattr(self.backplane.signals, op)(label, *args)
+
+    def _sim(self, msg: Message) -> None:
+        """What the backend's `sim` module injects (it checked the arguments)."""
+        op, args = msg.get("op"), msg.get("args")
+        if not isinstance(args, list):
+            raise ValueError(f"hardware link: a bad injection {msg!r:.80}")
+        bp = self.backplane
+        actions: dict[Any, Callable[..., None]] = {
+            "bus.unplug": bp.unplug, "bus.plug": bp.plug,
+            "input.set": bp.signals.set_input, "input.clear": bp.signals.clear_input,
+            "lift.jam": lambda on: self.world.jam_lift(bool(on)),
+            "lidar.blind": lambda on: self.faults.blind(bool(on)),
+            "imu.shift": lambda deg: self.faults.shift(float(deg))}
+        if op not in actions:
+            raise ValueError(f"hardware link: no injection {op!r:.40}")
+        actions[op](*args)
+
+    # -- the backend's process ------------------------------------------------------------------
+    def _start_backend(self, spec: dict[str, Any]) -> None:
+        mine, theirs = socket.socketpair()
+        argv = [sys.executable, "-m", "ramp.simulation.backend_process",
+                "--link-fd", str(theirs.fileno()), "--spec", json.dumps(spec)]
+        self.backend_proc = subprocess.Popen(argv, pass_fds=(theirs.fileno(),),
+                                             stdin=subprocess.DEVNULL,
+                                             stdout=subprocess.DEVNULL)
+        theirs.close()  # the backend's end: its death must close the link
+        self.hw = hw = SensorLink(mine, name="hardware link (simulator)")
+        hw.on("ready", lambda m: setattr(self, "backend_ready", m))
+        hw.on("failed", lambda m: setattr(self, "backend_failed", str(m.get("error", ""))))
+        hw.on("end", lambda m: setattr(self, "backend_end", m))
+        hw.on("out", self._out)
+        hw.on("sim", self._sim)
+        hw.on_close.append(self._backend_lost)
+        hw.attach(self.scheduler)
+
+    def _wait_backend(self, timeout_s: float) -> None:
+        """Run the hardware (the backend's drivers open on it) until the backend serves."""
+        deadline = time.monotonic() + timeout_s
+        self.scheduler.run(lambda: self.backend_ready is not None or self.hw.closed
+                           or bool(self.backend_failed) or time.monotonic() > deadline)
+        if self.backend_ready is None:
+            why = self.backend_failed or (f"its link closed: {self.hw.reason}" if
+                                          self.hw.closed else f"not ready in {timeout_s:g} s")
+            raise ArenaError(f"the backend's process (pid {self.backend_proc.pid}) could "
+                             f"not start: {why}")
+        host, port = self.backend_ready["mcp"]
+        #: Where the backend serves MCP.
+        self.mcp_address: tuple[str, int] = (str(host), int(port))
+
+    def _backend_lost(self, why: str) -> None:
+        if self.backend_end is None and not self.stopping:
+            code = self.backend_proc.poll()
+            self.stop(f"the backend's process (pid {self.backend_proc.pid}) ended"
+                      + (f" ({_status(code)})" if code is not None else "") + f": {why}")
+
+    def _end_backend(self) -> None:
+        """Tell the backend to stop (it stops every motor, then sends `end`), keep the
+        hardware running meanwhile so its zeros reach the emulators, and see it exit."""
+        proc = self.backend_proc
+        if self.hw.connected and self.backend_end is None:
+            self.hw.send("stop")
+            deadline = time.monotonic() + END_TIMEOUT_S
+            self.scheduler.run(lambda: self.backend_end is not None or self.hw.closed
+                               or time.monotonic() > deadline)
+        self.hw.close()
+        try:
+            proc.wait(EXIT_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            log.warning("the backend's process (pid %d) did not exit: SIGTERM", proc.pid)
+            proc.terminate()
+            try:
+                proc.wait(5.0)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+    # -- the run --------------------------------------------------------------------------------
     def stop(self, why: str) -> None:
         if not self.stopping:
             self.stopping = why
 
     def run(self) -> int:
-        host, port = self.backend.address
-        self.link.send("ready", pid=os.getpid(), mcp=[host, port],
-                       lidar=self.sensors.lidar_emulator.url)
+        ready = self.backend_ready or {}
+        self.link.send("ready", pid=os.getpid(), mcp=ready.get("mcp"),
+                       lidar=self.sensors.lidar_emulator.url,
+                       backend_pid=ready.get("pid"), service=ready.get("service"))
         try:
-            self.backend.scheduler.run(lambda: bool(self.stopping))
+            self.scheduler.run(lambda: bool(self.stopping))
             # Every motor stops before anything else: `end` may wait for the parent.
             motors = self.stop_motors()
             if self.link.connected:
-                self.link.send("end", why=self.stopping, backend=self.ticks.report(),
-                               motors=motors, **self._truth_fields(full=True))
+                end = self.backend_end or {}
+                self.link.send("end", why=self.stopping, backend=end.get("backend"),
+                               simulator=self.ticks.report(), motors=motors,
+                               **self._truth_fields(full=True))
                 self.link.drain(2.0)
         finally:
             self.close()
         return 0
 
     def stop_motors(self) -> dict[str, float]:
-        """`Supervisor.shutdown` (zeros on every wire), then the emulators read the wire
-        until every motor of the world reads zero or `STOP_SETTLE_S` has passed; the
-        world's motor duties as the robot was left (the summary's `motors_at_end`)."""
+        """The backend's shutdown (zeros on every wire, read here as they arrive), then the
+        emulators read the wire until every motor of the world reads zero or `STOP_SETTLE_S`
+        has passed; the world's motor duties as the robot was left (the summary's
+        `motors_at_end`)."""
         from firmware_like.marte import MOTORS
 
-        backend, world = self.backend, self.world
-        backend.supervisor.shutdown()
+        self._end_backend()
+        world = self.world
         deadline = time.monotonic() + STOP_SETTLE_S
         while True:
-            backend.backplane.service_wire(backend.clock.now())
+            self.backplane.service_wire(self.scheduler.clock.now())
             duty = {name: world.duty(name) for name in MOTORS}
             if not any(duty.values()) or time.monotonic() >= deadline:
                 break
@@ -303,19 +493,21 @@ class Arena:
             # read the zeros off their ptys only as the bytes arrive. A short wait here
             # is the whole of shutdown, bounded by STOP_SETTLE_S.
             time.sleep(0.01)
-        backend.close()
         return duty
 
     def close(self) -> None:
-        """Stop every motor, then close the ports and the link; each step runs even if one
-        before it raises. Idempotent."""
+        """The backend stopped (every motor), then the ports and the links closed; each step
+        runs even if one before it raises. Idempotent."""
         try:
-            self.backend.close()  # zeros on every wire, then the ports close
+            self._end_backend()
         finally:
             try:
                 self.sensors.close()
             finally:
-                self.link.close()
+                try:
+                    self.backplane.close()
+                finally:
+                    self.link.close()
 
     def _truth_fields(self, full: bool = False) -> dict[str, Any]:
         w = self.world
@@ -347,7 +539,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         arena = Arena(MissionOptions(**json.loads(args.options)), link)
     except Exception as exc:  # noqa: BLE001 - said to the parent, which reports it
-        link.send("failed", error=f"{type(exc).__name__}: {exc}")
+        link.send("failed", error=str(exc) if isinstance(exc, ArenaError)
+                  else f"{type(exc).__name__}: {exc}")
         link.drain(2.0)
         link.close()
         return 1
@@ -472,9 +665,14 @@ class ArenaProcess:
         except BaseException:
             self.finish()
             raise
-        mcp = self.ready["mcp"] if self.ready is not None else ("", 0)
+        ready: Message = self.ready or {}
+        mcp = ready.get("mcp") or ("", 0)
         self.mcp_address: tuple[str, int] = (str(mcp[0]), int(mcp[1]))
-        self.lidar_url = str(self.ready["lidar"]) if self.ready is not None else ""
+        self.lidar_url = str(ready.get("lidar", ""))
+        #: The backend's own process (the child starts it), and how it runs (`serve`).
+        self.backend_pid = int(ready.get("backend_pid") or self.pid)
+        service = ready.get("service")
+        self.service: dict[str, Any] = service if isinstance(service, dict) else {}
 
     def _wait_ready(self, timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s

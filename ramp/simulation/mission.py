@@ -9,14 +9,16 @@ its real drivers, its MCP link to the backend over TCP, the executive and the mi
 On the virtual clock a 10-minute run takes seconds and the same arguments give the same run;
 with `realtime` it runs on the wall clock and serves MCP on a port an operator can use.
 
-With `realtime` the robot and the arena run in a process of their own, as on the robot
-(`ramp.simulation.arena_process`: the world, the backend, the emulators, the `sim` module,
-on their own scheduler), so the autonomy's heavy work never makes the backend's tick late;
-this process keeps the autonomy, exactly as `ramp-autonomy` runs it, with its sensors over
+With `realtime` the simulated hardware and the arena run in a process of their own, and the
+backend in another, run exactly as `ramp run` runs it (the stall guard's thread,
+`gc.freeze()`, SCHED_FIFO where permitted), on the emulated wires
+(`ramp.simulation.arena_process`, `ramp.simulation.backend_process`), so neither the
+autonomy's heavy work nor the simulator's makes the backend's tick late; this process keeps
+the autonomy, exactly as `ramp-autonomy` runs it, with its sensors over
 SCIP/TCP and the sensor link (`ramp.autonomy.hal.simlink`), the trace, the summary and the
 observers, which read the world's truth as the child sends it (`MirroredWorld`). The hidden
-`single_loop` option runs realtime the old way, everything on one loop (for
-`python -m bench --only realtime`, which measures the difference).
+`single_loop` option runs realtime the old way, everything on one loop (issue 23's
+comparison).
 
 What comes out:
 
@@ -92,6 +94,9 @@ class MissionOptions:
     #: With realtime: serve the autonomy's command endpoint (SPEC 14) on this loopback port
     #: (0 picks one); the mission then waits for a supervisor's rmcMission.
     command_port: int | None = None
+    #: With realtime: the backend's process runs SCHED_FIFO at this priority where permitted,
+    #: as the service does (`scripts/ramp.service`); None: the default priority.
+    backend_rt_priority: int | None = 20
 
 
 @dataclass
@@ -157,6 +162,8 @@ class MissionRun:
         self.arena: ArenaProcess | None = None
         self.perception: Perception | None = None  # with the arena apart: the autonomy's
         self.backend_ticks: dict[str, Any] | None = None
+        #: With realtime: the simulator's own loop (the world, the emulators), for comparison.
+        self.simulator_ticks: dict[str, Any] | None = None
         self._tick_log: TickLog | None = None
         self._arena_lost_why = ""  # the error the lost child set, if it set it
         #: With the arena apart: each motor's duty in the world once the child's backend
@@ -317,6 +324,7 @@ class MissionRun:
         if end is not None:
             self._truth(end, sample=False)
             self.backend_ticks = end.get("backend")
+            self.simulator_ticks = end.get("simulator")
             motors = end.get("motors")
             if isinstance(motors, dict):
                 self.motors_at_end = {str(k): v for k, v in motors.items()}
@@ -401,9 +409,16 @@ class MissionRun:
             doc["randomized"] = self.randomization.as_dict()
         if o.realtime:
             doc["processes"] = {"autonomy": os.getpid(),
-                                "backend": self.arena.pid if self.arena else os.getpid()}
+                                "backend": self.arena.backend_pid if self.arena
+                                else os.getpid()}
+            if self.arena is not None:
+                doc["processes"]["simulator"] = self.arena.pid
+                # How the backend runs: as `ramp run` (the stall guard, gc.freeze, priority).
+                doc["backend_service"] = self.arena.service
             if self.backend_ticks is not None:
                 doc["backend_tick"] = self.backend_ticks
+            if self.simulator_ticks is not None:
+                doc["simulator_tick"] = self.simulator_ticks
             if self.arena is not None:
                 doc["motors_at_end"] = self.motors_at_end
         if self.error:

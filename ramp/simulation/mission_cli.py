@@ -193,8 +193,12 @@ def _mission(args: argparse.Namespace) -> int:
                 print(f"ramp sim mission: autonomy commands on {chost}:{cport} (the mission "
                       "waits for rmcMission)", flush=True)
             if run.arena is not None:
-                print(f"ramp sim mission: the robot and the arena run in process "
-                      f"{run.arena.pid}, the autonomy in process {os.getpid()}", flush=True)
+                service = run.arena.service
+                print(f"ramp sim mission: the backend runs in process {run.arena.backend_pid} "
+                      f"as `ramp run` runs ({service.get('policy', '?')}; stall guard "
+                      f"{'on' if service.get('stall_guard') else 'off'}), the simulated "
+                      f"hardware and the arena in process {run.arena.pid}, the autonomy in "
+                      f"process {os.getpid()}", flush=True)
             signal.signal(signal.SIGTERM, _interrupt)
         summary = run.run()
     finally:

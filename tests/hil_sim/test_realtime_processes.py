@@ -40,7 +40,6 @@ from ramp.autonomy.hal.simlink import SensorLink, SimLinkImu
 from ramp.clock import MonotonicClock
 from ramp.scheduler import Scheduler
 from ramp.simulation.arena_process import Arena, ArenaProcess
-from ramp.simulation.backend import SimBackend
 from ramp.simulation.mission import MissionOptions, MissionRun
 from tests.harness import REPO, ask_line
 
@@ -55,7 +54,7 @@ class Mission:
     on `started` (the test's cleanup) before anything can fail."""
 
     def __init__(self, started: list[Mission], *args: str) -> None:
-        self.child = 0
+        self.child = self.backend = 0
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "ramp.cli", "sim", "mission", "--realtime", "--port", "0",
              *args], cwd=REPO, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -64,9 +63,11 @@ class Mission:
         self.lines: list[str] = []
         m = self.expect(r"MCP on ([\d.]+):(\d+)", 60)
         self.host, self.port = m.group(1), int(m.group(2))
-        m = self.expect(r"the robot and the arena run in process (\d+), the autonomy in "
-                        r"process (\d+)", 5)
-        self.child, self.parent = int(m.group(1)), int(m.group(2))
+        m = self.expect(r"the backend runs in process (\d+) as `ramp run` runs \(([^;]*); "
+                        r"stall guard (\w+)\), the simulated hardware and the arena in process "
+                        r"(\d+), the autonomy in process (\d+)", 5)
+        self.backend, self.policy, self.guard = int(m.group(1)), m.group(2), m.group(3)
+        self.child, self.parent = int(m.group(4)), int(m.group(5))
 
     def expect(self, pattern: str, timeout: float) -> re.Match[str]:
         assert self.proc.stdout is not None
@@ -96,8 +97,9 @@ def cleanup() -> Iterator[list[Mission]]:
     yield started
     for m in started:
         m.close()
-        if m.child:
-            with_gone(m.child)
+        for pid in (m.child, m.backend):
+            if pid:
+                with_gone(pid)
 
 
 def with_gone(pid: int) -> None:
@@ -152,10 +154,16 @@ def wait_for(predicate: Callable[[], bool], timeout: float) -> bool:
 def test_the_backend_runs_in_its_own_process_and_the_operator_can_take_over(
         cleanup: list[Mission]) -> None:
     m = Mission(cleanup, "--duration", "120", "--json")
-    assert m.parent == m.proc.pid and m.child != m.parent
-    assert parent_of(m.child) == m.parent
+    assert m.parent == m.proc.pid and len({m.child, m.parent, m.backend}) == 3
+    assert parent_of(m.child) == m.parent and parent_of(m.backend) == m.child
+    # The backend serves MCP from its own process, run as `ramp run` runs: the stall
+    # guard's thread watches its loop.
     inode = listener_inode(m.port)
-    assert holds_socket(m.child, inode) and not holds_socket(m.parent, inode)
+    assert holds_socket(m.backend, inode)
+    assert not holds_socket(m.child, inode) and not holds_socket(m.parent, inode)
+    assert m.guard == "on"
+    # (Python 3.11 does not name its threads for the OS: the guard is the second thread.)
+    assert len(list(Path(f"/proc/{m.backend}/task").iterdir())) >= 2
     # The autonomy, in the parent, localizes against the child's sensors and goes on.
     m.expect(r"initial_localization -> prepare_for_scan", 60)
     sock = socket.create_connection((m.host, m.port), timeout=5)
@@ -178,7 +186,11 @@ def test_the_backend_runs_in_its_own_process_and_the_operator_can_take_over(
     assert summary["outcome"] == "error" and summary["error"] == "interrupted"
     motors = summary["motors_at_end"]
     assert motors and set(motors.values()) == {0.0}, motors
+    service = summary["backend_service"]
+    assert service["stall_guard"] and service["gc_frozen"] > 0, service
+    assert summary["processes"]["backend"] == summary["backend_tick"]["pid"] == m.backend
     assert wait_for(lambda: not running(m.child), 10), "the simulator's process outlived us"
+    assert wait_for(lambda: not running(m.backend), 10), "the backend's process outlived us"
     with pytest.raises(OSError):
         socket.create_connection((m.host, m.port), timeout=2).close()
 
@@ -193,6 +205,7 @@ def test_a_killed_simulator_ends_the_run_as_an_error_saying_so(cleanup: list[Mis
     assert '"outcome": "error"' in summary
     assert f"the simulator's process (pid {m.child}) is gone (killed by SIGKILL)" in summary
     assert "is gone" in err
+    assert wait_for(lambda: not running(m.backend), 15), "the backend's process outlived us"
 
 
 def test_a_killed_parent_leaves_no_simulator_behind(cleanup: list[Mission]) -> None:
@@ -200,6 +213,7 @@ def test_a_killed_parent_leaves_no_simulator_behind(cleanup: list[Mission]) -> N
     os.kill(m.parent, signal.SIGKILL)
     m.proc.communicate(timeout=10)
     assert wait_for(lambda: not running(m.child), 15), "the simulator's process outlived us"
+    assert wait_for(lambda: not running(m.backend), 15), "the backend's process outlived us"
     with pytest.raises(OSError):
         socket.create_connection((m.host, m.port), timeout=2).close()
 
@@ -277,7 +291,8 @@ def test_a_port_in_use_ends_the_command_saying_so() -> None:
         busy.close()
     assert out.returncode == 1
     assert re.search(r"ramp sim mission: the simulator's process \(pid \d+\) could not "
-                     r"start: OSError: \[Errno 98\] Address already in use", out.stderr)
+                     r"start: the backend's process \(pid \d+\) could not start: "
+                     r"OSError: \[Errno 98\] Address already in use", out.stderr)
 
 
 # -- ends that go wrong: nothing is left running, every motor stops -----------------------------
@@ -287,18 +302,15 @@ def broken(*args: object, **kwargs: object) -> NoReturn:
 
 def test_a_child_that_fails_to_build_stops_and_closes_what_it_built(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    import ramp.simulation.backend
-    import ramp.simulation.rig
+    built: list[Arena] = []
+    wait = Arena._wait_backend
 
-    built: list[tuple[SimBackend, tuple[str, int]]] = []
+    def served_then_broken(self: Arena, timeout_s: float) -> NoReturn:
+        wait(self, timeout_s)  # the backend's process serves, then a later step fails
+        built.append(self)
+        broken()
 
-    class Recorded(SimBackend):
-        def __init__(self, *args: Any, **kwargs: Any) -> None:
-            super().__init__(*args, **kwargs)
-            built.append((self, self.address))
-
-    monkeypatch.setattr(ramp.simulation.backend, "SimBackend", Recorded)
-    monkeypatch.setattr(ramp.simulation.rig, "SimSensors", broken)
+    monkeypatch.setattr(Arena, "_wait_backend", served_then_broken)
     a, b = socket.socketpair()
     link = SensorLink(a)
     try:
@@ -307,10 +319,12 @@ def test_a_child_that_fails_to_build_stops_and_closes_what_it_built(
     finally:
         link.close()
         b.close()
-    (backend, address), = built
-    assert backend.closed and not backend.supervisor.running
+    (arena,) = built
+    assert arena.backend_proc.returncode == 0  # told to stop: it stopped every motor
+    assert arena.backend_end is not None
+    assert arena.sensors.closed and arena.hw.closed
     with pytest.raises(OSError):
-        socket.create_connection(address, timeout=2).close()
+        socket.create_connection(arena.mcp_address, timeout=2).close()
 
 
 def test_the_child_stops_every_motor_before_its_end_and_closes_all_if_a_step_fails(
@@ -321,32 +335,34 @@ def test_the_child_stops_every_motor_before_its_end_and_closes_all_if_a_step_fai
     ends: list[dict[str, Any]] = []
     peer.on("end", ends.append)
     sensors_close = arena.sensors.close
-    mcp = socket.create_connection(arena.backend.address, timeout=5)
+    mcp = socket.create_connection(arena.mcp_address, timeout=5)
     try:
         said: list[str] = []
         operator = threading.Thread(target=lambda: said.extend(
             ask_line(mcp, line) for line in ("robot:control.acquire=(operator)",
                                              "base:base.drive=(50,0)")))
         operator.start()
-        arena.backend.scheduler.run_for(1.0)
+        arena.scheduler.run_for(1.0)  # the hardware; the backend runs in its own process
         operator.join(5)
         assert said == ["", ""] and arena.world.duty("base.lf_wheel") > 0.3  # driving
         events: list[str] = []
-        shutdown, send = arena.backend.supervisor.shutdown, arena.link.send
-        monkeypatch.setattr(arena.backend.supervisor, "shutdown",
-                            lambda: (events.append("shutdown"), shutdown())[1])
+        end_backend, send = arena._end_backend, arena.link.send
+        monkeypatch.setattr(arena, "_end_backend",
+                            lambda: (events.append("backend stopped"), end_backend())[1])
         monkeypatch.setattr(arena.link, "send",
                             lambda kind, **f: (events.append(kind), send(kind, **f))[1])
         monkeypatch.setattr(arena.sensors, "close", broken)
         arena.stop("the test")
         with pytest.raises(RuntimeError, match="broken on purpose"):
             arena.run()
-        assert events.index("shutdown") < events.index("end")
-        assert arena.backend.closed and arena.link.closed  # after the step that failed
+        assert events.index("backend stopped") < events.index("end")
+        assert arena.backend_proc.returncode == 0 and arena.backend_end is not None
+        assert arena.link.closed  # after the step that failed
         for _ in range(10):
             peer.pump(0.1)
         (end,) = ends
         assert end["why"] == "the test" and set(end["motors"].values()) == {0.0}
+        assert end["backend"]["pid"] == arena.backend_proc.pid
     finally:
         mcp.close()
         peer.close()
