@@ -376,16 +376,19 @@ def render(doc: dict[str, Any]) -> str:
     r = doc.get("realtime")
     if r and "error" not in r:
         out += [f"**realtime** (the backend's tick during `ramp sim mission --realtime`, seed "
-                f"{r['seed']}, {r['seconds']:g} s each, measured in the backend's process over "
-                "the whole run; before: `--single-loop`, everything on the autonomy's loop; "
-                "after: the robot and the arena in their own process)", "",
-                "| | p50 µs | p99 µs | max µs | stalls | overruns |", "|---|---|---|---|---|---|"]
-        for name, label in (("single_loop", "one loop (before)"),
-                            ("apart", "own process (after)")):
+                f"{r['seed']}, {r['seconds']:g} s each, measured in the backend's process, run "
+                "as `ramp run` runs, over the whole run; bare: nobody attached; attached: the "
+                "live view, the console and a headless Chromium page on it; baseline: a bare "
+                "100 Hz select loop in the same window)", "",
+                "| | p50 µs | p99 µs | max µs | stalls | overruns | baseline p50/p99/max µs |",
+                "|---|---|---|---|---|---|---|"]
+        for name in ("bare", "attached"):
             x = r[name]
-            late = x["late_us"] or {}
-            out.append(f"| {label} | {_num(late.get('p50'))} | {_num(late.get('p99'))} | "
-                       f"{_num(late.get('max'))} | {x['stalls']} | {x['overruns']} |")
+            late, base = x["late_us"] or {}, x["baseline_late_us"] or {}
+            out.append(f"| {name} | {_num(late.get('p50'))} | {_num(late.get('p99'))} | "
+                       f"{_num(late.get('max'))} | {x['stalls']} | {x['overruns']} | "
+                       f"{_num(base.get('p50'))} / {_num(base.get('p99'))} / "
+                       f"{_num(base.get('max'))} |")
         out.append("")
     return "\n".join(out)
 

@@ -116,8 +116,9 @@ def test_figures_are_real_measurements_beside_baselines(smoke: dict[str, Any]) -
     assert pc["flow"]["cpu_s"] > pc["flow"]["detect_cpu_s"] > 0
 
     rt = smoke["realtime"]
-    assert rt["single_loop"]["processes"] == 1 and rt["apart"]["processes"] == 2
-    for mode in ("single_loop", "apart"):
+    assert rt["bare"]["processes"] == rt["attached"]["processes"] == 3
+    assert rt["attached"]["attached"] and rt["attached"]["backend_service"]["stall_guard"]
+    for mode in ("bare", "attached"):
         assert rt[mode]["ticks"] > 0 and rt[mode]["late_us"]["max"] >= rt[mode]["late_us"]["p50"]
         assert rt[mode]["baseline_late_us"]["p50"] is not None
 
