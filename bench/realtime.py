@@ -5,10 +5,12 @@ thread, `gc.freeze()`, SCHED_FIFO where permitted: `ramp.runtime.service.serve`)
 wires of the simulated hardware, which runs in the simulator's process with the world's
 physics and the LIDAR's ray casting; the autonomy runs in the command's process
 (`ramp.simulation.arena_process`, `ramp.simulation.backend_process`). Two runs of the same
-mission on the wall clock, one after the other: `bare` (nobody attached) and `attached`:
-the live view served (`--foxglove-port 0`), the console (`ramp-teleop`) connected to the
-backend and to the live view, and a headless Chromium page open on the console, as an
-operator watches `make mission`. Each lasts long enough to include the initial localization
+mission on the wall clock, one after the other: `bare` (nobody attached), `attached` (the
+live view served, `--foxglove-port 0`, the console, `ramp-teleop`, connected to the backend
+and to the live view, and a headless Chromium page open on the console, as an operator
+watches `make mission`), and `attached_default_priority`, the same with the backend at the
+default priority (where SCHED_FIFO is permitted, what it buys; where it is not, the backend
+runs so anyway). Each lasts long enough to include the initial localization
 and the 3D scan of the obstacle field, the autonomy's heaviest work.
 
 The figures are the backend scheduler's own, measured in the backend's process
@@ -40,7 +42,11 @@ from bench.tick import BaselineLoop
 SECONDS = {"full": 90.0, "quick": 8.0, "smoke": 4.0}
 ROBOT_GET_EVERY_S = 5.0
 SEED = 0
-MODES = (("bare", False), ("attached", True))
+#: (name, attached, the mission's extra arguments): the last runs the backend at the default
+#: priority, to say what the service's SCHED_FIFO buys where it is permitted.
+MODES: tuple[tuple[str, bool, list[str]], ...] = (
+    ("bare", False, []), ("attached", True, []),
+    ("attached_default_priority", True, ["--backend-default-priority"]))
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
                   "--no-first-run", "--disable-background-networking",
@@ -100,10 +106,11 @@ def _robot_get_late(host: str, port: int) -> list[int] | None:
     return [int(g) for g in m.groups()] if m else None
 
 
-def _one(mode: str, attached: bool, seconds: float, workdir: Path) -> dict[str, Any]:
+def _one(mode: str, attached: bool, more: list[str], seconds: float,
+         workdir: Path) -> dict[str, Any]:
     progress(f"realtime: {mode}, a {seconds:g} s mission on the wall clock")
     base = BaselineLoop(100.0, workdir)
-    extra = ["--foxglove-port", "0"] if attached else []
+    extra = (["--foxglove-port", "0"] if attached else []) + more
     mission = Child(f"mission-{mode}", [sys.executable, "-m", "ramp.cli", "sim", "mission",
                                         "--realtime", "--port", "0", "--seed", str(SEED),
                                         "--duration", str(seconds), "--json", *extra],
@@ -184,8 +191,8 @@ def summary_of(mode: str, lines: list[str]) -> dict[str, Any]:
 def run(settings: Settings, workdir: Path) -> dict[str, Any]:
     seconds = SECONDS.get(settings.profile, SECONDS["quick"])
     out: dict[str, Any] = {"seconds": seconds, "seed": SEED}
-    for mode, attached in MODES:
-        out[mode] = _one(mode, attached, seconds, workdir)
+    for mode, attached, more in MODES:
+        out[mode] = _one(mode, attached, more, seconds, workdir)
     # The attached run's tick beside the bare select loop's in the same window.
     run_, base = out["attached"]["late_us"] or {}, out["attached"]["baseline_late_us"]
     out["p99_late_us"] = compare(run_.get("p99"), base.get("p99"))

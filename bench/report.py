@@ -378,12 +378,15 @@ def render(doc: dict[str, Any]) -> str:
         out += [f"**realtime** (the backend's tick during `ramp sim mission --realtime`, seed "
                 f"{r['seed']}, {r['seconds']:g} s each, measured in the backend's process, run "
                 "as `ramp run` runs, over the whole run; bare: nobody attached; attached: the "
-                "live view, the console and a headless Chromium page on it; baseline: a bare "
-                "100 Hz select loop in the same window)", "",
+                "live view, the console and a headless Chromium page on it; default priority: "
+                "the same with the backend not SCHED_FIFO; baseline: a bare 100 Hz select "
+                "loop in the same window, at the default priority)", "",
                 "| | p50 µs | p99 µs | max µs | stalls | overruns | baseline p50/p99/max µs |",
                 "|---|---|---|---|---|---|---|"]
-        for name in ("bare", "attached"):
-            x = r[name]
+        for name in ("bare", "attached", "attached_default_priority"):
+            x = r.get(name)
+            if x is None:
+                continue
             late, base = x["late_us"] or {}, x["baseline_late_us"] or {}
             out.append(f"| {name} | {_num(late.get('p50'))} | {_num(late.get('p99'))} | "
                        f"{_num(late.get('max'))} | {x['stalls']} | {x['overruns']} | "

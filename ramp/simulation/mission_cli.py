@@ -97,6 +97,10 @@ def add_mission_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser])
     # loop, in one process. Kept only so `python -m bench --only realtime` can measure what
     # the separate process buys; hidden from --help.
     p.add_argument("--single-loop", action="store_true", help=argparse.SUPPRESS)
+    # The backend's process runs SCHED_FIFO at the service's priority where permitted, as the
+    # service does; this runs it at the default priority instead, so the benchmark can say
+    # what the priority buys. Hidden from --help.
+    p.add_argument("--backend-default-priority", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_mission)
 
 
@@ -147,6 +151,8 @@ def _mission(args: argparse.Namespace) -> int:
                              duration=args.duration, world=args.world, config=args.config,
                              realtime=args.realtime, randomize=args.randomize,
                              single_loop=args.single_loop, command_port=args.command_port,
+                             **({"backend_rt_priority": None}
+                                if args.backend_default_priority else {}),
                              port=(REALTIME_PORT if args.port is None else args.port)
                              if args.realtime else 0)
     no_plot = plot_unavailable(args.plot)

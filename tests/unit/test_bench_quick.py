@@ -20,7 +20,7 @@ def quick_waits() -> float:
             + 2 * 2 * s.c2w_flood_s                                # command_to_wire floods
             + s.rss_after_s + tick_s + sup_s
             + console_bandwidth.SECONDS["quick"]
-            + len(realtime.MODES) * realtime.SECONDS["quick"])         # two missions
+            + len(realtime.MODES) * realtime.SECONDS["quick"])         # three missions
 
 
 def test_the_quick_profile_waits_under_a_minute_on_the_clock() -> None:

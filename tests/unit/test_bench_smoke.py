@@ -118,7 +118,8 @@ def test_figures_are_real_measurements_beside_baselines(smoke: dict[str, Any]) -
     rt = smoke["realtime"]
     assert rt["bare"]["processes"] == rt["attached"]["processes"] == 3
     assert rt["attached"]["attached"] and rt["attached"]["backend_service"]["stall_guard"]
-    for mode in ("bare", "attached"):
+    assert rt["attached_default_priority"]["backend_service"]["policy"].startswith("default")
+    for mode in ("bare", "attached", "attached_default_priority"):
         assert rt[mode]["ticks"] > 0 and rt[mode]["late_us"]["max"] >= rt[mode]["late_us"]["p50"]
         assert rt[mode]["baseline_late_us"]["p50"] is not None
 
