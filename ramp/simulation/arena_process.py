@@ -313,9 +313,8 @@ class Arena:
             self._sent_inputs, self._sent_present = dict(values), dict(present)
             spec = {"config": str(DEFAULT_RAMP_YAML), "port": o.port, "wire": wire,
                     "values": values, "present": present,
-                    "can_jam": hasattr(self.world, "jam_lift")}
-            if o.backend_rt_priority is not None:
-                spec["rt_priority"] = o.backend_rt_priority
+                    "can_jam": hasattr(self.world, "jam_lift"),
+                    "rt_priority": o.backend_rt_priority}
             self._start_backend(spec)
             built.callback(self._end_backend)
             self._wait_backend(READY_TIMEOUT_S)

@@ -193,7 +193,7 @@ def run(spec: dict[str, Any], link: SensorLink) -> int:
                            "gc_frozen": state.gc_frozen,
                            "stall_limit_s": sup.stall_guard.limit})
 
-    priority = spec.get("rt_priority", SERVICE_RT_PRIORITY)
+    priority = spec.get("rt_priority", SERVICE_RT_PRIORITY)  # null: the default priority
 
     def failed(exc: Exception) -> None:
         link.send("failed", error=f"{type(exc).__name__}: {exc}")
