@@ -199,7 +199,8 @@ class MissionRun:
         self.rig.scheduler.add_task("sim.trace", TRACE_HZ, self._sample)
 
     def _build_apart(self) -> None:
-        """The robot and the arena in their own process; the autonomy here, on its own
+        """The simulated hardware and the arena in their own process (which starts the
+        backend's, `ramp.simulation.backend_process`); the autonomy here, on its own
         scheduler and the wall clock, as `ramp-autonomy` runs on the robot."""
         from dataclasses import replace
 

@@ -1,12 +1,13 @@
 """`simlink` drivers: the IMU and the gimbal of a simulator that runs in another process.
 
-`ramp sim mission --realtime` runs the robot and the arena (the backend, the world, the
-Hokuyo, IMU and gimbal emulators) in a process of their own, as on the robot, where the
-autonomy's computer is not the backend's. The LIDAR already speaks SCIP over TCP and the
-backend MCP; the IMU and the gimbal are HAL-level emulators (USB cannot be emulated, SPEC
-6.2), so they reach the autonomy's process over this **sensor link**: one stream socket
-(a socketpair or loopback TCP) carrying one JSON object per line, each with its kind in
-`"k"`. The simulator's side is `ramp.simulation.arena_process`; this module never imports it.
+`ramp sim mission --realtime` runs the simulated hardware and the arena (the world, the
+Hokuyo, IMU and gimbal emulators) in a process of their own and the backend in another, as on
+the robot, where the autonomy's computer is not the backend's. The LIDAR already speaks SCIP
+over TCP and the backend MCP; the IMU and the gimbal are HAL-level emulators (USB cannot be
+emulated, SPEC 6.2), so they reach the autonomy's process over this **sensor link**: one
+stream socket (a socketpair or loopback TCP) carrying one JSON object per line, each with its
+kind in `"k"`. The simulator's side is `ramp.simulation.arena_process`; this module never
+imports it.
 
 - `encode(kind, **fields)` and `decode(buf) -> (used, message)` are the sans-IO codec (0 used:
   need more bytes; a message of None with bytes used: a blank line). A line longer than
