@@ -421,3 +421,30 @@ def test_a_close_that_fails_still_ends_the_child(monkeypatch: pytest.MonkeyPatch
     finally:
         run.arena.finish()
     assert code == 0, "the simulator's process was not told to end"
+
+
+def test_the_phidget_boards_and_the_sim_modules_injections_cross_the_hardware_link() -> None:
+    """The Phidget boards stay on the HAL-level sim driver in the backend's process, fed by
+    the simulator over the hardware link; what the `sim` module injects goes back over it."""
+    arena = ArenaProcess(MissionOptions(realtime=True, port=0, duration=60.0))
+    try:
+        mcp = socket.create_connection(arena.mcp_address, timeout=5)
+        try:
+            def volts() -> float:
+                m = re.search(r"base:battery\.volt=\(([\d.]+)\)", ask_line(mcp, "base:base.get=()"))
+                assert m is not None
+                return float(m.group(1))
+
+            fresh = volts()
+            assert fresh > 15.0  # the world's battery, read through the Phidget input
+            assert ask_line(mcp, "sim:input.set=(base,battery,10.5)") == ""
+            assert wait_for(lambda: abs(volts() - fresh) > 0.5, 5), "the override never came"
+            assert ask_line(mcp, "sim:bus.unplug=(ble_io)") == ""
+            assert wait_for(lambda: "robot:ble.state=(fault)" in ask_line(
+                mcp, "robot:robot.get=()"), 5), "unplugging the BLE's board faulted nothing"
+            assert "sim:bus.unplugged=(1)" in ask_line(mcp, "sim:sim.get=()")
+        finally:
+            mcp.close()
+    finally:
+        arena.finish()
+    assert arena.proc.returncode == 0
