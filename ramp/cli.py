@@ -112,16 +112,20 @@ def cmd_run(args: argparse.Namespace) -> int:
                                    line=config.lines.get("server.max_clients", 0))])
         return EXIT_CONFIG
     return run_supervisor(config, sim=args.sim, host=args.host, port=args.port,
-                          observer=getattr(args, "observer", None), record=args.record)
+                          observer=getattr(args, "observer", None), record=args.record,
+                          state_dir=args.state_dir)
 
 
 def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | None,
-                   observer: Observer | None = None, record: str | None = None) -> int:
+                   observer: Observer | None = None, record: str | None = None,
+                   state_dir: str | None = None) -> int:
     """Build, start and run until a stop signal; motors are stopped before returning.
     `observer` (see `ramp.runtime.observers`) watches the running supervisor; `record`
-    (`--record DIR`) records the run there, over the config's `recorder: dir`."""
+    (`--record DIR`) records the run there, over the config's `recorder: dir`; latches are
+    kept in `state_dir` (`--state-dir`, else `ramp.runtime.latch_state.default_state_dir`)."""
     from ramp.clock import MonotonicClock
     from ramp.runtime import build
+    from ramp.runtime.latch_state import LatchState, default_state_dir, state_file
     from ramp.runtime.recording import recorder_for
     from ramp.runtime.systemd import SystemdNotifier
 
@@ -154,6 +158,8 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
         else:  # a bug: its traceback helps whoever reads the log
             log.exception("cannot build the supervisor from %s", config.file)
         return 1
+    keep = Path(state_dir) if state_dir else default_state_dir()
+    sup.latch_state = LatchState(state_file(keep, config.file), config.file)
     notifier = SystemdNotifier()
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
@@ -262,6 +268,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--record", metavar="DIR", type=record_dir, default=None,
                      help="record the run into MCAP files in DIR (over the config's "
                           "recorder: dir; see `ramp log`)")
+    run.add_argument("--state-dir", metavar="DIR", default=None,
+                     help="where latched faults and interlocks are kept across restarts "
+                          "(default $STATE_DIRECTORY, else ~/.local/state/ramp)")
     run.add_argument("--log-level", default="info",
                      choices=["debug", "info", "warning", "error"])
     run.set_defaults(func=cmd_run)
