@@ -470,8 +470,10 @@ class RobotDistribution:
         ]
         active = self.interlocks.active_names()
         rows.append(Response("robot", "interlock", "active", active or ("none",)))
-        rows.extend(Response("robot", name, "state", (slot.state,))
-                    for name, slot in self.slots.items())
+        for name, slot in self.slots.items():
+            rows.append(Response("robot", name, "state", (slot.state,)))
+            if slot.state != "ok" and slot.reason:  # why, beside the state (SPEC 2.3)
+                rows.append(Response("robot", name, "reason", (slot.reason,)))
         if client is not None:
             rows.append(Response("robot", "access", "me", (client.identity, client.role)))
         if self.access_mode is not None:
