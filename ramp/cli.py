@@ -122,10 +122,11 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
     """Build, start and run until a stop signal; motors are stopped before returning.
     `observer` (see `ramp.runtime.observers`) watches the running supervisor; `record`
     (`--record DIR`) records the run there, over the config's `recorder: dir`; latches are
-    kept in `state_dir` (`--state-dir`, else `ramp.runtime.latch_state.default_state_dir`)."""
+    kept in `state_dir` (`--state-dir`, else `ramp.common.state_files.default_state_dir`)."""
     from ramp.clock import MonotonicClock
+    from ramp.common.state_files import default_state_dir
     from ramp.runtime import build
-    from ramp.runtime.latch_state import LatchState, default_state_dir, state_file
+    from ramp.runtime.latch_state import LatchState, state_file
     from ramp.runtime.recording import recorder_for
     from ramp.runtime.systemd import SystemdNotifier
 

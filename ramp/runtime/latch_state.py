@@ -28,11 +28,11 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from ramp.common.state_files import write_atomic
 from ramp.layers.functional.latch import FaultLatch
 
 log = logging.getLogger("ramp.latches")
@@ -42,17 +42,6 @@ FORMAT = 1
 CHECK_HZ = 10.0
 #: What a device restored from the file says while latched.
 RESTORED = " (latched before the restart)"
-
-
-def default_state_dir() -> Path:
-    """`$STATE_DIRECTORY` (systemd; the first if several), else `$XDG_STATE_HOME/ramp`,
-    else `~/.local/state/ramp`."""
-    systemd = os.environ.get("STATE_DIRECTORY", "")
-    if systemd:
-        return Path(systemd.split(":")[0])
-    xdg = os.environ.get("XDG_STATE_HOME", "")
-    base = Path(xdg) if xdg else Path.home() / ".local" / "state"
-    return base / "ramp"
 
 
 def state_file(state_dir: Path, config_file: str) -> Path:
@@ -151,16 +140,8 @@ class LatchState:
     def _write(self, devices: dict[str, str], rules: list[str]) -> bool:
         data = {"format": FORMAT, "config": self.config_file, "devices": devices,
                 "interlocks": rules}
-        tmp = self.path.with_name(self.path.name + ".tmp")
         try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            with open(tmp, "w", encoding="utf-8") as f:
-                json.dump(data, f, indent=1, sort_keys=True)
-                f.write("\n")
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, self.path)
-            _fsync_dir(self.path.parent)
+            write_atomic(self.path, json.dumps(data, indent=1, sort_keys=True) + "\n")
         except OSError as exc:
             if not self._write_failed:
                 log.warning("cannot keep the latch state in %s (%s): latches hold until "
@@ -171,17 +152,3 @@ class LatchState:
             log.info("latch state kept in %s again", self.path)
         self._write_failed = False
         return True
-
-
-def _fsync_dir(path: Path) -> None:
-    """The rename itself made durable (POSIX; a no-op where a directory cannot be opened)."""
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)

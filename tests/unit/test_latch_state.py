@@ -8,8 +8,9 @@ from types import SimpleNamespace
 
 import pytest
 
+from ramp.common.state_files import default_state_dir
 from ramp.layers.functional.latch import FaultLatch
-from ramp.runtime.latch_state import LatchState, default_state_dir, state_file
+from ramp.runtime.latch_state import LatchState, state_file
 
 
 def test_the_state_directory_follows_systemd_then_xdg(monkeypatch: pytest.MonkeyPatch,
