@@ -34,7 +34,7 @@ from ramp.layers.robot_distribution.control import Control
 from ramp.layers.robot_distribution.interlocks import Interlocks, speed_param
 from ramp.layers.robot_distribution.registry import ModuleRegistry, ModuleSlot
 from ramp.layers.robot_distribution.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S, Watchdog
-from ramp.mcp.messages import Request, Response, Value, error_response
+from ramp.mcp.messages import Request, Response, Value, clean_detail, error_response
 from ramp.mcp.params import FloatParam, NameParam
 from ramp.mcp.protocol import format_response
 
@@ -473,7 +473,7 @@ class RobotDistribution:
         for name, slot in self.slots.items():
             rows.append(Response("robot", name, "state", (slot.state,)))
             if slot.state != "ok" and slot.reason:  # why, beside the state (SPEC 2.3)
-                rows.append(Response("robot", name, "reason", (slot.reason,)))
+                rows.append(Response("robot", name, "reason", (clean_detail(slot.reason),)))
         if client is not None:
             rows.append(Response("robot", "access", "me", (client.identity, client.role)))
         if self.access_mode is not None:
