@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 from ramp.errors import DeviceError
 from ramp.hal.interfaces import Bus
+from ramp.registry import origin
 
 log = logging.getLogger("ramp.supervisor")
 
@@ -110,10 +111,12 @@ def _open(bus: Bus, now: float, bugs: set[tuple[str, str]]) -> DeviceError | Non
         key = (bus.name, type(exc).__name__)
         if key not in bugs:  # the traceback once per fault episode, not at every retry
             bugs.add(key)
-            log.error("bus %s (%s): the driver raised in open; retrying every second, the "
-                      "rest keep running", bus.name, bus.driver_name, exc_info=exc)
+            log.error("bus %s: the driver raised in open (%s); retrying every second, the "
+                      "rest keep running", bus.name, origin("ramp.drivers", bus.driver_name),
+                      exc_info=exc)
         _close(bus)
-        return DeviceError(bus.name, f"open failed: {type(exc).__name__}: {exc}")
+        return DeviceError(bus.name, f"open failed: {type(exc).__name__}: {exc} in "
+                                     f"{origin('ramp.drivers', bus.driver_name)}")
     return None
 
 

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 from ramp.errors import DeviceError
 from ramp.hal.interfaces import Bus, MotorChannel, ServoChannel
+from ramp.registry import origin
 from ramp.runtime.bus_opener import BusOpener
 from ramp.scheduler import Scheduler
 
@@ -193,9 +194,10 @@ class BusManager:
         detail = f"driver error in {where}: {key[1]}: {exc}".rstrip(": ")
         if key not in health.bugs:
             health.bugs.add(key)
-            log.error("bus %s (%s): the driver raised in %s; the bus is faulted and retried, "
-                      "the other buses keep running (its traceback is logged once per "
-                      "fault episode)", name, bus.driver_name, where, exc_info=exc)
+            log.error("bus %s: the driver raised in %s (%s); the bus is faulted and "
+                      "retried, the other buses keep running (its traceback is logged once "
+                      "per fault episode)", name, where, origin("ramp.drivers", bus.driver_name),
+                      exc_info=exc)
             self.fault(name, DeviceError(name, detail), now)
         else:
             self.fault(name, DeviceError(name, detail), now, quiet=True)
