@@ -90,7 +90,8 @@ class FaultyModule(DemoModule):
 
 
 class FaultyBus(SimBus):
-    """The sim driver (on the test's FakeWorld) raising, when named in `broken`, in: `open`,
+    """The sim driver (on the test's FakeWorld) raising, when named in `broken`, in: `init`
+    (when built), `open`,
     `ready`, `waiting` (it is then never ready, so the loop asks why), `fileno`, `tick` (its
     read path), `input` (its descriptor's handler), `command` and `output` (after writing:
     the worst case), `stop_motors`, `close`. It owns a socket pair so that its input is
@@ -102,6 +103,8 @@ class FaultyBus(SimBus):
     last: ClassVar[FaultyBus | None] = None
 
     def __init__(self, name: str, params: dict[str, Any], world: Any = None) -> None:
+        if "init" in self.broken:
+            raise _bug("__init__")
         super().__init__(name, params, world=world)
         self._pair: tuple[socket.socket, socket.socket] | None = None
 

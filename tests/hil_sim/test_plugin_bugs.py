@@ -310,3 +310,86 @@ def test_the_faulty_plugins_are_a_distribution_s_entry_points() -> None:
 
 def _unused(*args: Any) -> None:  # keeps the typing of the trigger tables honest
     pass
+
+
+# -- at start-up ------------------------------------------------------------------------------
+PLUGIN = "acme-faulty's entry point crane = tests.hil_sim.faulty_plugins:FaultyModule"
+DRIVER = "acme-faulty's entry point faultybus = tests.hil_sim.faulty_plugins:FaultyBus"
+
+
+@pytest.mark.parametrize(("yaml_text", "broken", "module", "state", "reason"), [
+    (MODULE_YAML, "init", "crane", "fault", f"{PLUGIN} raised when built: "),
+    (MODULE_YAML, "start", "crane", "fault", "start raised PluginBug: start is broken "),
+    (DRIVER_YAML, "init", "winch", "fault", f"bus bad: {DRIVER} raised when built: "),
+    (DRIVER_YAML, "open", "winch", "detached", "bus bad: open failed: PluginBug: "),
+], ids=["module-init", "module-start", "driver-init", "driver-open"])
+def test_a_plugin_that_fails_at_start_up_is_named_and_the_rest_start(
+        yaml_text: str, broken: str, module: str, state: str, reason: str,
+        caplog: pytest.LogCaptureFixture) -> None:
+    """SPEC 2.2: the rest of the robot starts and serves; the broken plugin is reported by
+    its distribution and entry point, in the log and in its module's reason."""
+    (FaultyModule if yaml_text is MODULE_YAML else FaultyBus).broken = {broken}
+    with caplog.at_level(logging.DEBUG, logger="ramp"):
+        h = harness(yaml_text)
+        try:
+            c = h.connect()
+            get = keep_talking(h, c, 2.5)
+            assert value(get, f"robot:{module}.state") == state
+            assert value(get, "robot:arm.state") == "ok"
+            why = h.sup.slots[module].reason
+            assert reason in why, why
+            assert "acme-faulty's entry point" in why, why
+            others_serve(h, c, module)
+        finally:
+            h.close()
+    assert "acme-faulty's entry point" in caplog.text
+    assert len(tracebacks(caplog)) == 1, tracebacks(caplog)
+
+
+def test_ramp_run_starts_without_a_module_type_that_fails_to_import(tmp_path: Any) -> None:
+    """An installed distribution (`acme-broken`) whose module type raises at import: `ramp
+    check` refuses the file naming the distribution and entry point at the YAML key; `ramp
+    run` logs the same, starts the rest of the robot, and answers for the broken module
+    with `fault` and that reason."""
+    import socket
+    import subprocess
+    import sys
+
+    from tests.harness import REPO, ask_line, start_ramp, stop_process
+
+    (tmp_path / "acme_broken").mkdir()
+    (tmp_path / "acme_broken" / "__init__.py").write_text("LIMIT = 1 / 0\n")
+    info = tmp_path / "acme_broken-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: acme-broken\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[ramp.modules]\ncrane = acme_broken:Crane\n")
+    config = tmp_path / "robot.yaml"
+    config.write_text("server: {host: 127.0.0.1, port: 0}\n"
+                      "buses:\n  io: {driver: sim}\n"
+                      "modules:\n"
+                      "  crane: {type: crane, motor: {bus: io}}\n"
+                      "  demo: {motor: {bus: io}, lamp: {bus: io}}\n")
+    env = {"PYTHONPATH": str(tmp_path)}
+    check = subprocess.run([sys.executable, "-m", "ramp.cli", "check", str(config)], cwd=REPO,
+                           capture_output=True, text=True, timeout=60,
+                           env={**__import__("os").environ, **env})
+    assert check.returncode == 2
+    assert f"{config}:5: modules.crane.type: module type 'crane' (entry point crane = " \
+           "acme_broken:Crane in ramp.modules of acme-broken) cannot be loaded: " in check.stderr
+    assert f"{tmp_path / 'acme_broken' / '__init__.py'}:1: ZeroDivisionError" in check.stderr
+    proc, host, port = start_ramp(["--sim", "--config", str(config)], env=env)
+    try:
+        with socket.create_connection((host, port), timeout=5) as s:
+            assert ask_line(s, "robot:robot.modules=()") == "robot:robot.modules=(demo)"
+            assert "robot:crane.state=(fault)" in ask_line(s, "robot:robot.get=()")
+            refused = ask_line(s, "crane:motor.vel=(10)")
+            assert refused.startswith("crane:motor.error=(fault,module crane is fault: module "
+                                      "type 'crane' "), refused
+            assert "of acme-broken" in refused
+            assert ask_line(s, "demo:motor.vel=(30)") == ""
+            assert "demo:motor.vel=(30)" in ask_line(s, "demo:demo.get=()")
+    finally:
+        stop_process(proc)
+        _, err = proc.communicate()
+    assert "cannot be loaded" in err and "acme-broken" in err
+    assert "the rest of the robot starts without it" in err
