@@ -15,7 +15,7 @@ import socket
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
-from ramp.api import Function, IntParam, Property, Task
+from ramp.api import Function, IntParam, Property, Response, Task
 from ramp.hal.interfaces import DigitalOutput, MotorChannel
 from ramp.hal.simio import SimBus
 from ramp.modules.demo import DemoModule
@@ -37,7 +37,7 @@ class FaultyModule(DemoModule):
     task, each of which, and each of its life-cycle methods, raises when named in
     `broken`: `init`, `start`, `is_moving`, `stop`, `vel` (after commanding its motor: the
     worst case), `pulse` (before commanding anything), `lamp`, `get` (its `motor.temp`
-    property), `tasks`, `task`."""
+    property), `read` (its read function `motor.load`), `tasks`, `task`."""
 
     broken: ClassVar[set[str]] = set()
 
@@ -49,6 +49,7 @@ class FaultyModule(DemoModule):
         self.add(Function("motor", "pulse", (IntParam(-100, 100),), self._pulse, "motion",
                           "a short push in %"))
         self.prop(Property("motor", "temp", "int", self._temp, "C"))
+        self.add(Function("motor", "load", (), self._load, "read", "the motor's load"))
 
     def _check(self, where: str) -> None:
         if where in self.broken:
@@ -65,6 +66,10 @@ class FaultyModule(DemoModule):
     def _lamp(self, on: int) -> None:
         self._check("lamp")
         super()._lamp(on)
+
+    def _load(self) -> list[Response]:
+        self._check("read")
+        return [Response(self.name, "motor", "load", (0,))]
 
     def _temp(self) -> int:
         self._check("get")

@@ -196,6 +196,27 @@ def test_a_property_that_raises_costs_only_its_row(caplog: pytest.LogCaptureFixt
         h.close()
 
 
+def test_a_read_function_that_raises_costs_only_its_answer(
+        caplog: pytest.LogCaptureFixture) -> None:
+    h = harness(MODULE_YAML)
+    try:
+        c = h.connect()
+        assert c.ask("crane:motor.load=()") == "crane:motor.load=(0)"
+        assert c.ask("crane:motor.vel=(50)") == ""
+        FaultyModule.broken = {"read"}
+        with caplog.at_level(logging.DEBUG, logger="ramp"):
+            for _ in range(5):
+                h.advance(0.1)
+                answer = c.ask("crane:motor.load=()arm:arm.get=()")
+                assert answer.startswith("crane:motor.error=(fault,internal error PluginBug)"
+                                         "arm:motor.vel=(0)"), answer
+        assert h.sup.slots["crane"].state == "ok"  # reading moves nothing: it keeps working
+        assert h.world.motors["crane.motor"] == 0.5
+        assert len(tracebacks(caplog)) == 1
+    finally:
+        h.close()
+
+
 # -- a driver plugin --------------------------------------------------------------------------
 def _reopen(h: Harness, c: Client) -> None:
     """The device vanishes for a moment: the bus is closed and opened again."""
