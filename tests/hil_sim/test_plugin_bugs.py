@@ -329,10 +329,6 @@ def test_the_faulty_plugins_are_a_distribution_s_entry_points() -> None:
     assert drivers().entry("faultybus").distribution == DIST
 
 
-def _unused(*args: Any) -> None:  # keeps the typing of the trigger tables honest
-    pass
-
-
 # -- at start-up ------------------------------------------------------------------------------
 PLUGIN = "acme-faulty's entry point crane = tests.hil_sim.faulty_plugins:FaultyModule"
 DRIVER = "acme-faulty's entry point faultybus = tests.hil_sim.faulty_plugins:FaultyBus"
