@@ -17,7 +17,7 @@ from ramp import __version__
 from ramp.common.files import why
 from ramp.common.hostport import format_hostport
 from ramp.config import Config, check_config, valid_host
-from ramp.errors import ConfigError, RampError
+from ramp.errors import ConfigError, PluginError, RampError
 
 if TYPE_CHECKING:
     from ramp.runtime.observers import Observer
@@ -75,6 +75,9 @@ def cmd_check(args: argparse.Namespace) -> int:
         _print_errors(errors)
         named = args.file if args.file.strip() else "(no file name)"  # `ramp check ""`
         print(f"{named}: {len(errors)} error{'s' if len(errors) != 1 else ''}", file=sys.stderr)
+        if config is not None:  # only plugins whose code raised (see PluginError)
+            print(f"{named}: `ramp run` would start the rest of the robot, with "
+                  f"{'these' if len(errors) != 1 else 'this'} in fault", file=sys.stderr)
         return EXIT_CONFIG
     assert config is not None
     rules = len(config.interlocks)
@@ -92,10 +95,12 @@ def cmd_check(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     setup_logging(args.log_level)
     config, errors = check_config(args.config)
-    if errors:
+    if errors and (config is None or not all(isinstance(e, PluginError) for e in errors)):
         _print_errors(errors)
         return EXIT_CONFIG
     assert config is not None
+    for err in errors:  # SPEC 2.2: a plugin that fails at start-up is its module's fault only
+        log.error("%s; the rest of the robot starts without it", err)
     if not args.sim:
         sim_buses = [ConfigError("the sim driver stands in for hardware only under "
                                  "`ramp run --sim`; name the bus's real driver, or add --sim",
