@@ -7,12 +7,15 @@ many times faster than real, and waits for them at no cost."""
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from typing import Any
 
 from ramp.autonomy.command import CommandEndpoint
 from ramp.simulation.mission import MissionOptions, MissionRun
+
+ASK_EVERY_S = 0.05
 
 
 class VirtualRobot:
@@ -39,15 +42,20 @@ class VirtualRobot:
 
     def run_until(self, pred: Callable[[], bool], wall_s: float = 60.0,
                   sim_s: float = 1800.0) -> None:
-        """Run until `pred()` (asked every few simulated ms); AssertionError past `wall_s`
-        of wall time or `sim_s` of simulated time."""
+        """Run until `pred()` (asked at most every `ASK_EVERY_S` of wall time, so a costly
+        question does not slow the simulation); AssertionError past `wall_s` of wall time
+        or `sim_s` of simulated time."""
         wall_end = time.monotonic() + wall_s
         sim_end = self.clock.now() + sim_s
         timed_out: list[str] = []
+        asked = [-math.inf]
 
         def stop() -> bool:
-            if pred():
-                return True
+            t = time.monotonic()
+            if t - asked[0] >= ASK_EVERY_S:
+                asked[0] = t
+                if pred():
+                    return True
             if time.monotonic() > wall_end or self.clock.now() > sim_end:
                 timed_out.append(f"{time.monotonic() - wall_end + wall_s:.0f} s wall, "
                                  f"{self.clock.now() - sim_end + sim_s:.0f} s simulated")
