@@ -277,3 +277,14 @@ def test_the_fleet_knows_the_arena_as_the_autonomy_does() -> None:
     assert orders_mod.ARENA_LENGTH_M == arena.ARENA_LENGTH_M
     assert orders_mod.ARENA_WIDTH_M == arena.ARENA_WIDTH_M
     assert orders_mod.COLLECTOR_XY == (arena.ROBOT_LENGTH_M / 2, arena.COLLECTOR_Y_M)
+
+
+def test_the_docs_example_order_is_valid_and_runs_here() -> None:
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "operating" / "fleet.md").read_text()
+    block = doc.split("An example (a dig", 1)[1].split("```json", 1)[1].split("```", 1)[0]
+    msg = json.loads(block)
+    validate("order", msg)
+    order = v.parse_order(msg)
+    assert orders_mod.check(order) == ""
+    assert [w.kind for w in orders_mod.plan_work(order, 0, "o1")] == [
+        "goto", "goto", "dig", "dump"]
