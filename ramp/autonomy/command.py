@@ -58,6 +58,7 @@ STATUS_EVERY_S = 0.5
 MAX_LINE = 4096
 MAX_CLIENTS = 4
 WAITING_FOR_ORDER = "waiting for the fleet's rmcMission order"
+TASK_RUNS = "held while the fleet's node tasks run"
 
 
 class _Client:
@@ -145,6 +146,8 @@ class CommandEndpoint:
             return {"re": name, "ok": True}
         if name == "resume":
             if self.tasks is not None and self.tasks.resume():
+                # the mission stays held, out of the task's way
+                m.hold(WAITING_FOR_ORDER if not self.dispatched else TASK_RUNS)
                 if client is not None:
                     client.commanded = True
                 return {"re": name, "ok": True, "note": "the node task starts again"}
@@ -182,7 +185,7 @@ class CommandEndpoint:
             else:
                 return {"re": name, "ok": False, "error": f"{key} must be a finite number"}
         if m.held is None:
-            m.hold(WAITING_FOR_ORDER)  # the mission stays out of the way of the task
+            m.hold(TASK_RUNS)  # the mission stays out of the way of the task
         why = self.tasks.start(name, str(cmd.get("id") or ""), **args)
         if why:
             return {"re": name, "ok": False, "error": why}

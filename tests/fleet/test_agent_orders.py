@@ -18,7 +18,7 @@ import pytest
 from ramp.fleet import vda5050 as v
 from ramp.fleet.broker import LocalBroker
 from tests.fleet.schemas import validate
-from tests.fleet.virtual_robot import VirtualRobot
+from tests.fleet.virtual_robot import ASK_EVERY_S, VirtualRobot
 from tests.fleet_fixtures import Collector, start_agent
 from tests.harness import stop_process
 
@@ -56,16 +56,18 @@ def test_an_order_of_three_nodes_digs_and_dumps(robot: VirtualRobot, mosquitto: 
     try:
         robot.run_until(lambda: any(
             {"dig", "dump"} <= {a["actionType"] for a in m["protocolFeatures"]["agvActions"]}
-            for m in col.json("/factsheet")), wall_s=30)
+            for m in col.json("/factsheet")), wall_s=30, every_s=ASK_EVERY_S)
         robot.run_until(seen(lambda m: any(i["infoType"] == "missionState"
-                                           for i in m["information"])), wall_s=30)
+                                           for i in m["information"])),
+                        wall_s=30, every_s=ASK_EVERY_S)
         # A node without a position: refused, and the state says why.
         publish("order", v.order(H, "bad", [
             v.node("here", 0, 0.75, 1.4),
             {"nodeId": "nowhere", "sequenceId": 2, "released": True, "actions": []}]))
         robot.run_until(seen(lambda m: any(
             e["errorType"] == "orderError" and "nowhere" in e["errorDescription"]
-            and "no nodePosition" in e["errorDescription"] for e in m["errors"])), wall_s=20)
+            and "no nodePosition" in e["errorDescription"] for e in m["errors"])),
+            wall_s=20, every_s=ASK_EVERY_S)
         # Three released nodes and one on the horizon.
         nodes = [
             v.node("n1", 0, 0.75, 1.4, theta=0.0),
@@ -78,7 +80,8 @@ def test_an_order_of_three_nodes_digs_and_dumps(robot: VirtualRobot, mosquitto: 
         order["edges"][-1]["released"] = False
         publish("order", order)
         robot.run_until(seen(lambda m: m["orderId"] == "o1" and action(m, "dump-1").get(
-            "actionStatus") in ("FINISHED", "FAILED")), wall_s=120, sim_s=900)
+            "actionStatus") in ("FINISHED", "FAILED")),
+            wall_s=120, sim_s=900, every_s=ASK_EVERY_S)
         mine = [m for m in states() if m["orderId"] == "o1"]
         last = mine[-1]
         assert action(last, "dump-1")["actionStatus"] == "FINISHED", last["actionStates"]

@@ -6,11 +6,12 @@ robot."""
 
 from __future__ import annotations
 
+import socket
 from collections.abc import Iterator
 
 import pytest
 
-from ramp.autonomy.command import CommandEndpoint
+from ramp.autonomy.command import WAITING_FOR_ORDER, CommandEndpoint
 from tests.fleet.virtual_robot import VirtualRobot
 
 ENDED = ("done", "failed", "cancelled")
@@ -101,7 +102,28 @@ def test_pause_resume_and_cancel_stop_the_robot(robot: VirtualRobot) -> None:
     assert wheels_still(robot) and near(robot, here["x"], here["y"], tol=0.02)
     assert ask(ep, cmd="resume")["ok"]
     assert robot.task()["state"] == "running"
+    assert ep.status()["held"] == WAITING_FOR_ORDER  # the mission stays out of the way
     robot.run_until(lambda: robot.task().get("step") == "goto" and not wheels_still(robot))
     assert ask(ep, cmd="cancel", reason="order o1 cancelled")["ok"]
     assert robot.task()["state"] == "cancelled"
     robot.run_until(lambda: wheels_still(robot), sim_s=1.0)
+
+
+def test_an_operator_who_takes_control_makes_the_task_wait(robot: VirtualRobot) -> None:
+    ep = robot.endpoint
+    assert ask(ep, cmd="goto", x=2.0, y=2.8, theta=0.0, id="n4")["ok"]
+    robot.run_until(lambda: robot.task().get("step") == "goto" and not wheels_still(robot))
+    with socket.create_connection(robot.mcp) as op:
+        op.sendall(b"robot:control.acquire=(ana)\n")
+        robot.run_until(lambda: robot.task().get("state") == "waiting")
+        assert "ana holds control" in robot.task()["reason"] or "not_owner" in \
+            robot.task()["reason"], robot.task()
+        robot.run_until(lambda: wheels_still(robot), sim_s=1.0)
+        since = robot.clock.now()
+        robot.run_until(lambda: robot.clock.now() > since + 3.0)
+        assert robot.task()["state"] == "waiting" and wheels_still(robot)
+        op.sendall(b"robot:control.release=()\n")
+        robot.run_until(lambda: robot.task().get("state") in ENDED)
+        op.recv(65536)
+    assert robot.task()["state"] == "done", robot.task()
+    assert near(robot, 2.0, 2.8), robot.world.truth()

@@ -41,10 +41,11 @@ class VirtualRobot:
         return self.run.world
 
     def run_until(self, pred: Callable[[], bool], wall_s: float = 60.0,
-                  sim_s: float = 1800.0) -> None:
-        """Run until `pred()` (asked at most every `ASK_EVERY_S` of wall time, so a costly
-        question does not slow the simulation); AssertionError past `wall_s` of wall time
-        or `sim_s` of simulated time."""
+                  sim_s: float = 1800.0, every_s: float = 0.0) -> None:
+        """Run until `pred()`, asked at every tick, or at most every `every_s` of wall time
+        (`ASK_EVERY_S` for a costly question, which would slow the simulation: the run may
+        then go on for some simulated time after it holds); AssertionError past `wall_s` of
+        wall time or `sim_s` of simulated time."""
         wall_end = time.monotonic() + wall_s
         sim_end = self.clock.now() + sim_s
         timed_out: list[str] = []
@@ -52,7 +53,7 @@ class VirtualRobot:
 
         def stop() -> bool:
             t = time.monotonic()
-            if t - asked[0] >= ASK_EVERY_S:
+            if t - asked[0] >= every_s:
                 asked[0] = t
                 if pred():
                     return True
