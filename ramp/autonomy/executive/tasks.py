@@ -52,6 +52,7 @@ from ramp.autonomy.executive.step import Step
 from ramp.autonomy.planning import Planner, PlanResult, Pose
 from ramp.statemachine import Mission, StandStill, Status
 from ramp.statemachine.status import StatusKind
+from ramp.statemachine.table import STATE
 
 log = logging.getLogger("ramp.autonomy.tasks")
 
@@ -69,6 +70,9 @@ RECOVERY = ("relevel", "rescan", "relocalize")
 RESUME_AT = {"cross_home": "plan_path_home", "dock": "plan_path_home"}
 #: Steps that move the robot across the ground: never while the pose is not confident.
 DRIVING_STEPS = frozenset({GOTO, "prepare_for_scan", "cross_home", "dock", "decouple"})
+#: Time-outs of the steps that are not the mission's states (theirs are in its table).
+GOTO_TIMEOUT_S = 300.0
+DIG_EXTRA_S = 60.0  # beyond `dig_max_s`: the ladder's stroke and the stop
 
 
 def in_arena(x: float, y: float) -> bool:
@@ -205,6 +209,7 @@ class NodeTasks:
         self.kit = kit
         self.task: Task | None = None
         self._activity: Any = None
+        self._step_started = 0.0
         self._fixed = False  # a fix was made by a task (or the mission)
 
     # -- what the endpoint asks ---------------------------------------------------------------
@@ -280,8 +285,11 @@ class NodeTasks:
                 robot.moving = False
                 return
             self._start_step(task, task.steps.pop(0), now)
+        timeout = self._timeout(task.step)
         if task.step in DRIVING_STEPS and not self._confident():
             status = Status.lost("the pose is not confident")
+        elif timeout is not None and now - self._step_started >= timeout:
+            status = Status.failed(f"no result after {timeout:g} s")
         else:
             status = self._activity.tick(now, dt)
         if status.is_running:
@@ -339,8 +347,18 @@ class NodeTasks:
             steps += ["plan_path_home", "cross_home", "dock", "deposit", "decouple"]
         return steps
 
+    def _timeout(self, name: str) -> float | None:
+        if name == GOTO:
+            return GOTO_TIMEOUT_S
+        if name == DIG:
+            return self.kit.settings.dig_max_s + DIG_EXTRA_S
+        if name not in STATE:
+            return None
+        return self.mission.config.timeout_of(name)  # the mission's, as configured
+
     def _start_step(self, task: Task, name: str, now: float) -> None:
         task.step = name
+        self._step_started = now
         make: Callable[[], Any]
         if name == GOTO:
             assert task.target is not None
