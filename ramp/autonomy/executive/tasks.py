@@ -28,7 +28,8 @@ why it failed or waits), `target`.
 
 What happens on the way, as in the mission: a lost pose stops the robot, re-levels,
 re-localizes and goes on from the plan (at most `MAX_RECOVERIES` times); a fault or failure
-stops the robot and fails the task, saying why; an operator's takeover makes it wait (it
+stops the robot and fails the task, saying why (so does a step past its time-out: the
+mission's for its states, `GOTO_TIMEOUT_S` for a goto); an operator's takeover makes it wait (it
 never takes control from one) and go on, re-localized, once control is free; `hold` stops the
 robot and `resume` starts the task again from its first step (control, pose, plan).
 """
