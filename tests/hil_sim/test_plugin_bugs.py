@@ -17,20 +17,12 @@ import pytest
 from ramp.config import BusConfig
 from ramp.hal import driver_class
 from ramp.hal.interfaces import Bus
-from tests.harness import FakeWorld, Harness, value
+from tests.harness import DEMO_YAML, FakeWorld, Harness, value
 from tests.harness import TestClient as Client
 from tests.hil_sim.faulty_plugins import DIST, FaultyBus, FaultyModule, register
 
-MODULE_YAML = """
-server: {host: 127.0.0.1, port: 0, max_clients: 4}
-watchdog: {timeout: 0.5}
-buses:
-  io: {driver: sim}
-  io2: {driver: sim}
-modules:
-  crane: {type: crane, motor: {bus: io}, lamp: {bus: io}}
-  arm: {type: demo, motor: {bus: io2}, lamp: {bus: io2}}
-"""
+#: The harness's demo robot with a `crane` of the faulty type in the first module's place.
+MODULE_YAML = DEMO_YAML.replace("  demo: {motor:", "  crane: {type: crane, motor:")
 
 DRIVER_YAML = """
 server: {host: 127.0.0.1, port: 0, max_clients: 4}
