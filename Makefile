@@ -86,7 +86,8 @@ test: lint $(ACCEL)
 # (no build) runs it. `make test` ran them beside the compiled simulator; the backend itself
 # is never compiled (scripts/build_accel.py), so both runs test the code the robot runs.
 SAFETY_SUITES := tests/hil_sim/test_safety.py tests/hil_sim/test_safety_model.py \
-	tests/hil_sim/test_latched_faults.py tests/hil_sim/test_commanders.py \
+	tests/hil_sim/test_latched_faults.py tests/hil_sim/test_latch_restart.py \
+	tests/hil_sim/test_commanders.py \
 	tests/hil_sim/test_interlocks.py tests/hil_sim/test_scout_interlocks.py \
 	tests/hil_sim/test_stalls.py tests/hil_sim/test_driver_bugs.py \
 	tests/hil_sim/test_room_for_a_stop.py tests/unit/test_scheduler.py \

@@ -1,9 +1,12 @@
-"""`startup`: process start to `ramp: ready`, resident memory, and SIGTERM to exit.
+"""`startup`: process start to `ramp: ready`, resident memory, idle CPU, and SIGTERM to exit.
 
 The real command line, `python -m ramp.cli run --sim` with the repository's ramp.yaml (no
 bench hooks), started several times; the median is reported. The baseline is a bare
 interpreter printing the same line (`python -c 'print(...)'`), interleaved run by run so a
-busy moment hits both. The last process of each kind stays up for the memory reading.
+busy moment hits both. The last process of each kind stays up for the memory reading, and
+meanwhile the idle CPU of that `ramp run --sim` (utime + stime of every thread over the
+window, as a probe reading /proc would) is measured beside the tick benchmark's bare
+100 Hz select loop running over the same window (`bench.tick.BaselineLoop`).
 """
 
 from __future__ import annotations
@@ -13,7 +16,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from bench.common import MARTE_YAML, PYTHON, Child, Settings, compare, progress
+from bench.common import MARTE_YAML, PYTHON, Child, Settings, compare, load_marte, progress
+from bench.tick import BaselineLoop
 
 READY = r"ramp: ready on "
 RAMP_ARGV = [PYTHON, "-m", "ramp.cli", "run", "--sim", "--config", str(MARTE_YAML),
@@ -59,8 +63,20 @@ def run(settings: Settings, workdir: Path) -> dict[str, Any]:
                 bare_stop.append(_stop_ms(bare))
         assert ramp is not None and bare is not None
         rss_ready = (ramp.status_kb("VmRSS"), bare.status_kb("VmRSS"))
-        progress(f"startup: resident memory after {settings.rss_after_s:g} s")
-        time.sleep(settings.rss_after_s)
+        progress(f"startup: resident memory and idle CPU over {settings.rss_after_s:g} s, "
+                 "a bare select loop beside it")
+        rate = float(load_marte()["scheduler"]["rate_hz"])
+        loop = BaselineLoop(rate, workdir)
+        try:
+            t0 = time.monotonic()
+            cpu0, loop0 = ramp.cpu_seconds(), loop.child.cpu_seconds()
+            time.sleep(settings.rss_after_s)
+            t1 = time.monotonic()
+            cpu1, loop1 = ramp.cpu_seconds(), loop.child.cpu_seconds()
+            idle_cpu = round(100 * (cpu1 - cpu0) / (t1 - t0), 2)
+            loop_cpu = loop.finish(t0, t1, loop1 - loop0)["cpu_pct"]
+        finally:
+            loop.child.kill()
         rss_later = (ramp.status_kb("VmRSS"), bare.status_kb("VmRSS"))
         hwm = (ramp.status_kb("VmHWM"), bare.status_kb("VmHWM"))
         threads = ramp.status_kb("Threads")
@@ -90,6 +106,11 @@ def run(settings: Settings, workdir: Path) -> dict[str, Any]:
         "rss_mb_after": {"seconds": settings.rss_after_s,
                          **compare(mb(rss_later[0]), mb(rss_later[1]))},
         "peak_rss_mb": compare(mb(hwm[0]), mb(hwm[1])),
+        # Issue 35's probe: `ramp run --sim` idle, beside a bare 100 Hz select loop doing
+        # nothing over the same window (goal: at most 2 % of a core and 35 MB resident).
+        "idle_cpu_pct": {"seconds": settings.rss_after_s, "rate_hz": rate,
+                         "baseline_is": "bare select loop at the same rate",
+                         **compare(idle_cpu, loop_cpu)},
         "threads": threads,  # the stall guard is the one extra thread
         "sigterm_to_exit_ms": {
             "median": compare(round(statistics.median(ramp_stop), 1),

@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import math
 import os
 import select
 import socket
@@ -96,6 +97,9 @@ class SabertoothEmulator:
         self._rx: list[int] = []
         self._wire: deque[tuple[float, int]] = deque()  # paced: (completion time, byte)
         self._wire_free_at = 0.0
+        #: No controller can time out before this (a microsecond early, against rounding):
+        #: an idle tick is one comparison. -inf: worked out again at the next `_expire`.
+        self._quiet_until = -math.inf
 
     # -- input --------------------------------------------------------------------------------
     def feed(self, now: float, data: bytes) -> None:
@@ -147,6 +151,7 @@ class SabertoothEmulator:
             self.counters["foreign"] += 1
             return
         self._expire(t)  # a timeout due before this packet happened first
+        self._quiet_until = -math.inf  # its time or its timeout changes below
         self.counters["packets"] += 1
         self.packets.append((t, address, command, data))
         if self.on_packet is not None:
@@ -191,22 +196,27 @@ class SabertoothEmulator:
         self._expire(now)
 
     def _expire(self, now: float) -> None:
+        if now < self._quiet_until:
+            return
+        quiet = math.inf
         for ctl in self.controllers.values():
-            if (
-                ctl.timeout_s > 0 and not ctl.timed_out and ctl.last_valid is not None
-                and now - ctl.last_valid > ctl.timeout_s
-            ):
-                ctl.timed_out = True
-                self.counters["timeouts"] += 1
-                for motor in (1, 2):
-                    ctl.duty[motor - 1] = 0.0
-                    if self.on_motor is not None:
-                        self.on_motor(ctl.address, motor, 0.0)
+            if ctl.timeout_s > 0 and not ctl.timed_out and ctl.last_valid is not None:
+                if now - ctl.last_valid > ctl.timeout_s:
+                    ctl.timed_out = True
+                    self.counters["timeouts"] += 1
+                    for motor in (1, 2):
+                        ctl.duty[motor - 1] = 0.0
+                        if self.on_motor is not None:
+                            self.on_motor(ctl.address, motor, 0.0)
+                else:
+                    quiet = min(quiet, ctl.last_valid + ctl.timeout_s - 1e-6)
+        self._quiet_until = quiet
 
     def power_cycle(self, address: int) -> None:
         """Controller reset (a brown-out): motors stop, the serial timeout is off again."""
         old = self.controllers[address]
         self.controllers[address] = Controller(address)
+        self._quiet_until = -math.inf
         for motor in (1, 2):
             if old.duty[motor - 1] != 0.0 and self.on_motor is not None:
                 self.on_motor(address, motor, 0.0)

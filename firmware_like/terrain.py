@@ -14,20 +14,38 @@ under a centimetre across one). Two users, two needs:
 - the LIDAR (`ray_hits`): 1081 rays at once in numpy. The ground is bracketed between its
   lowest and highest possible level, sampled and refined by regula falsi; rocks and crater
   bowls are quadrics, solved in closed form.
+
+numpy is imported on first use: `ramp run --sim` stands MARTE in an empty, level arena with
+no LIDAR, whose wheels only ever ask the scalar methods, and numpy would be 19 MB of its
+memory for nothing. A terrain with waves, rocks or craters builds its arrays as it is made.
 """
 
 from __future__ import annotations
 
+import importlib
 import math
 import random
-
-import numpy as np
-import numpy.typing as npt
+from typing import TYPE_CHECKING, Any
 
 from firmware_like.arena import Layout
 from firmware_like.arena_params import HIT_CRATER, HIT_GROUND, HIT_NONE, HIT_ROCK, ArenaParams
 
-Array = npt.NDArray[np.float64]
+if TYPE_CHECKING:
+    import numpy as np
+    import numpy.typing as npt
+
+    Array = npt.NDArray[np.float64]
+else:
+    class _Numpy:
+        """numpy, imported the first time one of its names is used here (the module's `np`
+        then becomes numpy itself)."""
+
+        def __getattr__(self, name: str) -> Any:
+            module = importlib.import_module("numpy")
+            globals()["np"] = module
+            return getattr(module, name)
+
+    np = _Numpy()
 
 _GROUND_SAMPLES = 8  # samples across the band where a ray can meet the undulating ground
 _REFINE_STEPS = 1  # regula falsi steps after the bracket, plus a last interpolation: the
@@ -47,7 +65,7 @@ class Terrain:
         n = 0 if flat or ap.ground_amplitude == 0.0 else ap.ground_waves
         weights = [rng.uniform(0.5, 1.0) for _ in range(n)]
         total = sum(weights) or 1.0
-        self._amp = np.array([ap.ground_amplitude * w / total for w in weights])
+        amp = [ap.ground_amplitude * w / total for w in weights]
         kx, ky, phase = [], [], []
         for _ in range(n):
             direction = rng.uniform(0.0, math.pi)
@@ -55,18 +73,40 @@ class Terrain:
             kx.append(k * math.cos(direction))
             ky.append(k * math.sin(direction))
             phase.append(rng.uniform(0.0, 2.0 * math.pi))
-        self._kx, self._ky, self._phase = np.array(kx), np.array(ky), np.array(phase)
-        self._waves = list(zip(self._amp.tolist(), kx, ky, phase, strict=True))
+        self._waves = list(zip(amp, kx, ky, phase, strict=True))
         #: Highest the bare ground rises above (and sinks below) z = 0.
-        self.amplitude = float(self._amp.sum())
+        self.amplitude = 0.0
         #: Steepest slope the bare ground can have (sum of amplitude x wavenumber).
-        self._max_slope = float(np.sum(self._amp * np.hypot(self._kx, self._ky)))
+        self._max_slope = 0.0
         #: Sharpest curvature it can have (sum of amplitude x wavenumber squared).
-        self._max_curvature = float(np.sum(self._amp * (self._kx ** 2 + self._ky ** 2)))
+        self._max_curvature = 0.0
         rocks, craters = layout.rocks, layout.craters
         self._rock = [(r.x, r.y, r.radius, r.height, self.ground_at(r.x, r.y)) for r in rocks]
         self._crater = [(c.x, c.y, c.radius, c.depth, self.ground_at(c.x, c.y))
                         for c in craters]
+        self._reach = max([r[2] for r in self._rock] + [c[2] for c in self._crater] + [0.0])
+        self._centres = [(r[0], r[1]) for r in self._rock] + [(c[0], c[1]) for c in self._crater]
+        #: (wheel radius, half width) -> the squared distance `wheel_contact` looks within.
+        self._wheel_reach2: dict[tuple[float, float], float] = {}
+        self._arrays_built = False
+        if n or self._rock or self._crater:  # a level, empty floor needs no numpy
+            self._arrays(amp, kx, ky, phase)
+
+    def _arrays(self, amp: list[float] | None = None, kx: list[float] | None = None,
+                ky: list[float] | None = None, phase: list[float] | None = None) -> None:
+        """The numpy side of the terrain (the rays, the maps), built once: as the terrain is
+        made when it has waves, rocks or craters, else on the first call that needs it."""
+        if self._arrays_built:
+            return
+        self._arrays_built = True
+        if amp is None or kx is None or ky is None or phase is None:
+            amp = [w[0] for w in self._waves]
+            kx, ky, phase = ([w[i] for w in self._waves] for i in (1, 2, 3))
+        self._amp = np.array(amp)
+        self._kx, self._ky, self._phase = np.array(kx), np.array(ky), np.array(phase)
+        self.amplitude = float(self._amp.sum())
+        self._max_slope = float(np.sum(self._amp * np.hypot(self._kx, self._ky)))
+        self._max_curvature = float(np.sum(self._amp * (self._kx ** 2 + self._ky ** 2)))
         self._rx = np.array([r[0] for r in self._rock])
         self._ry = np.array([r[1] for r in self._rock])
         self._rr = np.array([r[2] for r in self._rock])
@@ -77,10 +117,6 @@ class Terrain:
         self._cr = np.array([c[2] for c in self._crater])
         self._cd = np.array([c[3] for c in self._crater])
         self._cb = np.array([c[4] for c in self._crater])
-        self._reach = max([r[2] for r in self._rock] + [c[2] for c in self._crater] + [0.0])
-        self._centres = [(r[0], r[1]) for r in self._rock] + [(c[0], c[1]) for c in self._crater]
-        #: (wheel radius, half width) -> the squared distance `wheel_contact` looks within.
-        self._wheel_reach2: dict[tuple[float, float], float] = {}
         self._steps = np.arange(4096)  # ray numbers, sliced per call
         self._k = np.stack([self._kx, self._ky])  # (2, waves): phase rate per metre of x, y
 
@@ -95,6 +131,7 @@ class Terrain:
 
     def ground(self, x: Array, y: Array) -> Array:
         """Height of the bare regolith at many points (any matching shapes)."""
+        self._arrays()
         z = np.zeros(np.broadcast_shapes(np.shape(x), np.shape(y)))
         for amp, kx, ky, phase in self._waves:
             z += amp * np.sin(kx * x + ky * y + phase)
@@ -106,6 +143,7 @@ class Terrain:
 
     def height(self, x: Array, y: Array) -> Array:
         """Height of the surface at many points, for maps and tests."""
+        self._arrays()
         x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
         z = self.ground(x, y)
         for cx, cy, r, h, base in self._rock:
@@ -216,6 +254,7 @@ class Terrain:
     def rock_boxes(self) -> Array:
         """Bounding boxes of the rocks, (m, 8, 3) corners, for a caller that can tell which
         rays may reach them (a scanner sweeps its beams in order of angle)."""
+        self._arrays()
         out = np.zeros((len(self._rock), 8, 3))
         for i, (cx, cy, r, h, base) in enumerate(self._rock):
             out[i] = [[cx + sx * r, cy + sy * r, base + sz * h]
@@ -228,6 +267,7 @@ class Terrain:
         """First hit of rays from one `origin` (3,) along unit `dirs` (n, 3) with the surface,
         no farther than `t_max` (n,): (t, kind), t = inf and kind HIT_NONE where none.
         `rock_rows[i]`, when given, holds every ray that can reach rock i."""
+        self._arrays()
         n = dirs.shape[0]
         t = np.full(n, np.inf)
         kind = np.full(n, HIT_NONE, dtype=np.int8)

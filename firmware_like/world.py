@@ -15,6 +15,10 @@ A part is any object with the methods of `ramp.hal.simio.SimWorld` it needs (`se
 `step(dt)`, and optionally `revision` (an int that moves on when its readings may change) and
 `bus_present(bus)`, each one the part has when it is added.
 
+A part whose `step` raises (a plugin's bug) is faulted on its own: its traceback logged once,
+never stepped again, `on_part_fault` told (the backplane then makes its devices go dead on
+their wires, so the backend's drivers fault those buses), and the other parts keep stepping.
+
 The buses read a few signals and ask `revision` and `bus_present` on every tick, so a
 signal's owner, once found, is called directly, and the parts with a `revision` or a
 `bus_present` are listed when they are added.
@@ -72,6 +76,10 @@ class World:
         self._bus_watchers: list[Any] = []  # the parts with a `bus_present` of their own
         #: Inputs the `sim` module holds at a value (`sim:input.set`): name -> quantity.
         self.overrides: dict[str, float] = {}
+        #: Parts whose `step` raised, never stepped again (see the module docstring).
+        self.faulted: list[Any] = []
+        #: Told each part that faults, once (the backplane: its devices go dead).
+        self.on_part_fault: Any = None
         for part in parts or []:
             self.add(part)
 
@@ -213,6 +221,26 @@ class World:
     def step(self, dt: float) -> None:
         for part in self.parts:
             step = getattr(part, "step", None)
-            if step is not None:  # a payload its chassis carries is stepped by the chassis
+            if step is None:  # a payload its chassis carries is stepped by the chassis
+                continue
+            if self.faulted and any(p is part for p in self.faulted):
+                continue
+            try:
                 step(dt)
+            except Exception as exc:  # noqa: BLE001 - a part's bug faults that part only
+                self._part_failed(part, exc)
         self._own_revision += 1  # a part with no revision of its own is sampled every step
+
+    def _part_failed(self, part: Any, exc: Exception) -> None:
+        """`part`'s step raised: it is faulted (never stepped again), said once with its
+        traceback, and `on_part_fault` makes its devices go dead; the others keep going."""
+        self.faulted.append(part)
+        self._own_revision += 1
+        log.error("sim: the emulator part %s raised in step; it is faulted (its devices go "
+                  "dead on their wires), the other parts keep stepping",
+                  type(part).__name__, exc_info=exc)
+        if self.on_part_fault is not None:
+            try:
+                self.on_part_fault(part)
+            except Exception:  # noqa: BLE001 - the report must not stop the other parts
+                log.exception("sim: making the faulted part's devices go dead failed")

@@ -15,7 +15,7 @@ from ramp import __version__
 from ramp.common.files import why
 from ramp.common.hostport import format_hostport
 from ramp.config import Config, check_config, valid_host
-from ramp.errors import ConfigError, RampError
+from ramp.errors import ConfigError, PluginError, RampError
 
 if TYPE_CHECKING:
     from ramp.runtime.observers import Observer
@@ -71,6 +71,9 @@ def cmd_check(args: argparse.Namespace) -> int:
         _print_errors(errors)
         named = args.file if args.file.strip() else "(no file name)"  # `ramp check ""`
         print(f"{named}: {len(errors)} error{'s' if len(errors) != 1 else ''}", file=sys.stderr)
+        if config is not None:  # only plugins whose code raised (see PluginError)
+            print(f"{named}: `ramp run` would start the rest of the robot, with "
+                  f"{'these' if len(errors) != 1 else 'this'} in fault", file=sys.stderr)
         return EXIT_CONFIG
     assert config is not None
     rules = len(config.interlocks)
@@ -88,10 +91,12 @@ def cmd_check(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     setup_logging(args.log_level)
     config, errors = check_config(args.config)
-    if errors:
+    if errors and (config is None or not all(isinstance(e, PluginError) for e in errors)):
         _print_errors(errors)
         return EXIT_CONFIG
     assert config is not None
+    for err in errors:  # SPEC 2.2: a plugin that fails at start-up is its module's fault only
+        log.error("%s; the rest of the robot starts without it", err)
     if not args.sim:
         sim_buses = [ConfigError("the sim driver stands in for hardware only under "
                                  "`ramp run --sim`; name the bus's real driver, or add --sim",
@@ -108,19 +113,24 @@ def cmd_run(args: argparse.Namespace) -> int:
                                    line=config.lines.get("server.max_clients", 0))])
         return EXIT_CONFIG
     return run_supervisor(config, sim=args.sim, host=args.host, port=args.port,
-                          observer=getattr(args, "observer", None), record=args.record)
+                          observer=getattr(args, "observer", None), record=args.record,
+                          state_dir=args.state_dir)
 
 
 def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | None,
                    observer: Observer | None = None, record: str | None = None,
-                   rt_priority: int | None = None) -> int:
+                   state_dir: str | None = None, rt_priority: int | None = None) -> int:
     """Build, start and run until a stop signal, as the service runs
     (`ramp.runtime.service.serve`); motors are stopped before returning. `observer` (see
     `ramp.runtime.observers`) watches the running supervisor; `record` (`--record DIR`)
-    records the run there, over the config's `recorder: dir`; `rt_priority`: SCHED_FIFO at
-    this priority where permitted (None: as started; the systemd unit sets it)."""
+    records the run there, over the config's `recorder: dir`; latches are kept in
+    `state_dir` (`--state-dir`, else `ramp.common.state_files.default_state_dir`);
+    `rt_priority`: SCHED_FIFO at this priority where permitted (None: as started; the
+    systemd unit sets it)."""
     from ramp.clock import MonotonicClock
+    from ramp.common.state_files import default_state_dir
     from ramp.runtime import build
+    from ramp.runtime.latch_state import LatchState, state_file
     from ramp.runtime.recording import recorder_for
     from ramp.runtime.service import STOP_SIGNALS, ServiceState, serve
 
@@ -153,6 +163,8 @@ def run_supervisor(config: Config, *, sim: bool, host: str | None, port: int | N
         else:  # a bug: its traceback helps whoever reads the log
             log.exception("cannot build the supervisor from %s", config.file)
         return 1
+    keep = Path(state_dir) if state_dir else default_state_dir()
+    sup.latch_state = LatchState(state_file(keep, config.file), config.file)
     reloader = None
     if config.access.configured or config.server.tls is not None:
         # A deployed robot (SPEC 13): SIGHUP reloads `access` (systemd's ExecReload), as
@@ -234,6 +246,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--record", metavar="DIR", type=record_dir, default=None,
                      help="record the run into MCAP files in DIR (over the config's "
                           "recorder: dir; see `ramp log`)")
+    run.add_argument("--state-dir", metavar="DIR", default=None,
+                     help="where latched faults and interlocks are kept across restarts "
+                          "(default $STATE_DIRECTORY, else ~/.local/state/ramp)")
     run.add_argument("--log-level", default="info",
                      choices=["debug", "info", "warning", "error"])
     run.set_defaults(func=cmd_run)

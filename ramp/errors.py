@@ -34,6 +34,12 @@ class ConfigError(RampError, ValueError):
         super().__init__(": ".join([*parts, message]))
 
 
+class PluginError(ConfigError):
+    """A plugin named in the config whose code raised when loaded (at import). `ramp check`
+    reports it as any config error; `ramp run` logs it and starts the rest of the robot,
+    the module (or the bus, and the modules on it) in `fault` for good with this reason."""
+
+
 class ConfigErrors(RampError):
     """Several configuration errors reported together (`ramp check` shows them all)."""
 

@@ -100,7 +100,7 @@ class Registry:
         try:
             obj: Any = importlib.import_module(module_name)
         except Exception as exc:  # a plugin's code: anything it raises is its load error
-            raise PluginLoadError(f"{self.describe(e)} cannot be loaded: {_where(exc)}"
+            raise PluginLoadError(f"{self.describe(e)} cannot be loaded: {where(exc)}"
                                   f"{type(exc).__name__}: {exc}") from exc
         try:
             for part in attr.split(".") if attr else ():
@@ -117,7 +117,17 @@ class Registry:
                 f"{e.value} in {self.group} of {e.distribution})")
 
 
-def _where(exc: BaseException) -> str:
+def origin(group: str, name: str) -> str:
+    """Who provides `name` in `group`, for a log line or a fault reason (never raises):
+    `acme-crane's entry point crane = acme_crane.module:Crane`."""
+    try:
+        e = registry(group).entry(name)
+    except (RegistryError, ValueError):
+        return f"{_WHAT.get(group, group)} {name} (not registered)"
+    return f"{e.distribution}'s entry point {e.name} = {e.value}"
+
+
+def where(exc: BaseException) -> str:
     """`FILE:LINE: ` of the plugin's code that raised (its innermost frame outside the import
     machinery; a syntax error's own place), or '' when the import found no file at all."""
     if isinstance(exc, SyntaxError) and exc.filename:

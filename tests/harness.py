@@ -162,9 +162,10 @@ class SimHarness(Harness):
 
     def __init__(self, yaml_text: str = MARTE_YAML, wire_level: bool = True,
                  seed: int = 0, recorder: Any = None, observer: Any = None,
-                 marte: bool = True) -> None:
+                 marte: bool = True, latch_state: Any = None) -> None:
         """`marte`: hand the backplane a seeded MARTE model (False: the world is what the
-        config's emulators build, as for Scout; `world` is then the composed world)."""
+        config's emulators build, as for Scout; `world` is then the composed world).
+        `latch_state`: a `LatchState` kept across harnesses (a restart)."""
         from firmware_like.marte import MarteWorld
         from ramp.simulation.backplane import SimBackplane
 
@@ -176,6 +177,7 @@ class SimHarness(Harness):
         self.sup = build(self.config, self.clock, self.backplane.bus_factory,
                          host="127.0.0.1", port=0, recorder=recorder, observer=observer)
         self.backplane.attach(self.sup)
+        self.sup.latch_state = latch_state
         self.sup.start()
         self.sup.settle()
         self.clients = []

@@ -256,7 +256,7 @@ def run_on_robot(cfg: AutonomyConfig, backend: tuple[str, int], *,
         try:
             commands = CommandEndpoint(autonomy.mission, pose=tracker.estimate,
                                        confidence=lambda: tracker.confidence, now=clock.now,
-                                       port=command_port)
+                                       port=command_port, kit=autonomy.kit)
         except OSError as exc:
             print(f"ramp-autonomy: --command-port: {exc}", file=sys.stderr)
             autonomy.close()

@@ -10,16 +10,29 @@ twice a second every client also gets `{"status": {...}}`:
     {"cmd": "rmcMission"}                       start the RMC mission (see below)
     {"cmd": "pause", "reason": "..."}           hold the mission (it stops and waits)
     {"cmd": "resume"}                           end the hold
-    {"cmd": "goto"|"dig"|"dump", ...}           refused: this autonomy runs whole missions
+    {"cmd": "goto", "x": X, "y": Y, "theta": T, "id": "..."}   drive to a pose (theta
+                                                optional, radians; arena frame, m)
+    {"cmd": "dig", "seconds": S, "id": "..."}   dig where the robot stands (S optional)
+    {"cmd": "dump", "id": "..."}                to the collector, dock, deposit
+    {"cmd": "cancel", "reason": "..."}          stop the node task (the robot stops)
 
 status: `state` (the mission machine's), `started`, `held` (why, or null), `over`,
 `outcome`, `pose` ({x, y, yaw} in the arena frame, radians; null while lost or unknown),
-`confidence` (0..1), `bin_kg`, `delivered_kg`, `has_control`.
+`confidence` (0..1), `bin_kg`, `delivered_kg`, `has_control`, `task` (the node task: `kind`,
+`id`, `state` running|waiting|held|done|failed|cancelled, `step`, `reason`, `target`; null
+before the first).
+
+Node tasks (`goto`, `dig`, `dump`: ramp/autonomy/executive/tasks.py) run the mission's own
+activities (its localizer, planner, follower, dig and deposit) while the mission is held,
+one at a time; they are refused while the RMC mission runs, and `rmcMission` is refused
+while one runs. `pause` holds a running task too (the robot stops), `resume` starts a held
+task again from its first step (the mission stays held).
 
 With an endpoint, the mission starts held ("waiting for an order") and the run's time starts
 when `rmcMission` releases it. Safety: a client that started the mission, or held it, and
 then disconnects (an agent that died) leaves the mission held, so the motion it commanded
-stops; only a new `resume` or `rmcMission` from a client ends that hold.
+stops; only a new `resume` or `rmcMission` from a client ends that hold. A client that
+started a node task and disconnects cancels it: the robot stops.
 """
 
 from __future__ import annotations
@@ -31,9 +44,13 @@ import logging
 import math
 import socket
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ramp.statemachine import Mission
+
+if TYPE_CHECKING:
+    from ramp.autonomy.executive.kit import Kit
+    from ramp.autonomy.executive.tasks import NodeTasks
 
 log = logging.getLogger("ramp.autonomy.command")
 
@@ -41,6 +58,7 @@ STATUS_EVERY_S = 0.5
 MAX_LINE = 4096
 MAX_CLIENTS = 4
 WAITING_FOR_ORDER = "waiting for the fleet's rmcMission order"
+TASK_RUNS = "held while the fleet's node tasks run"
 
 
 class _Client:
@@ -57,8 +75,14 @@ class CommandEndpoint:
 
     def __init__(self, mission: Mission, *, pose: Callable[[], Any],
                  confidence: Callable[[], float], now: Callable[[], float],
-                 host: str = "127.0.0.1", port: int = 0, loop: Any = None) -> None:
+                 host: str = "127.0.0.1", port: int = 0, loop: Any = None,
+                 kit: Kit | None = None) -> None:
         self.mission = mission
+        self.tasks: NodeTasks | None = None
+        if kit is not None:  # node tasks need the executive's kit (ramp-autonomy, the sim)
+            from ramp.autonomy.executive.tasks import NodeTasks
+
+            self.tasks = NodeTasks(mission, kit)
         self.pose = pose
         self.confidence = confidence
         self.now = now
@@ -86,7 +110,8 @@ class CommandEndpoint:
                 "confidence": round(float(self.confidence()), 3),
                 "bin_kg": round(float(ctx.bin_kg), 2),
                 "delivered_kg": round(float(ctx.delivered_kg), 2),
-                "has_control": m.has_control}
+                "has_control": m.has_control,
+                "task": self.tasks.status() if self.tasks is not None else None}
 
     # -- commands ---------------------------------------------------------------------------
     def handle(self, client: _Client | None, cmd: Any) -> dict[str, Any]:
@@ -97,6 +122,8 @@ class CommandEndpoint:
         if name == "status":
             return {"re": name, "ok": True, "status": self.status()}
         if name == "rmcMission":
+            if self.tasks is not None and self.tasks.active:
+                return {"re": name, "ok": False, "error": "a node task runs: cancel it first"}
             if self.dispatched and not m.over:
                 if m.held is not None:
                     return {"re": name, "ok": False,
@@ -112,9 +139,18 @@ class CommandEndpoint:
                 client.commanded = True
             return {"re": name, "ok": True}
         if name == "pause":
-            m.hold(str(cmd.get("reason") or "paused by a supervisor"))
+            reason = str(cmd.get("reason") or "paused by a supervisor")
+            m.hold(reason)
+            if self.tasks is not None:
+                self.tasks.hold(reason)
             return {"re": name, "ok": True}
         if name == "resume":
+            if self.tasks is not None and self.tasks.resume():
+                # the mission stays held, out of the task's way
+                m.hold(WAITING_FOR_ORDER if not self.dispatched else TASK_RUNS)
+                if client is not None:
+                    client.commanded = True
+                return {"re": name, "ok": True, "note": "the node task starts again"}
             if not self.dispatched:
                 m.hold(WAITING_FOR_ORDER)
                 return {"re": name, "ok": True, "note": "no mission dispatched yet"}
@@ -123,13 +159,51 @@ class CommandEndpoint:
                 client.commanded = True
             return {"re": name, "ok": True}
         if name in ("goto", "dig", "dump"):
-            return {"re": name, "ok": False, "error": f"{name}: this autonomy runs whole RMC "
-                    "missions only (rmcMission); node-by-node driving is not implemented"}
+            return self._task(client, name, cmd)
+        if name == "cancel":
+            reason = str(cmd.get("reason") or "cancelled by a supervisor")
+            if self.tasks is None or not self.tasks.cancel(reason):
+                return {"re": name, "ok": True, "note": "no node task runs"}
+            return {"re": name, "ok": True, "status": self.status()}
         return {"re": name, "ok": False, "error": f"unknown command {name!r}"}
+
+    def _task(self, client: _Client | None, name: str, cmd: dict[str, Any]) -> dict[str, Any]:
+        m = self.mission
+        if self.tasks is None:
+            return {"re": name, "ok": False, "error": f"{name}: this autonomy runs whole RMC "
+                    "missions only (rmcMission): it was started without node tasks"}
+        if self.dispatched and not m.over and m.held is None:
+            return {"re": name, "ok": False, "error": "the RMC mission runs: pause it first"}
+        args: dict[str, float | None] = {}
+        for key in ("x", "y", "theta", "seconds"):
+            value = cmd.get(key)
+            if value is None:
+                args[key] = None
+            elif isinstance(value, int | float) and not isinstance(value, bool) \
+                    and math.isfinite(value):
+                args[key] = float(value)
+            else:
+                return {"re": name, "ok": False, "error": f"{key} must be a finite number"}
+        if m.held is None:
+            m.hold(TASK_RUNS)  # the mission stays out of the way of the task
+        why = self.tasks.start(name, str(cmd.get("id") or ""), **args)
+        if why:
+            return {"re": name, "ok": False, "error": why}
+        if client is not None:
+            client.commanded = True
+        return {"re": name, "ok": True, "status": self.status()}
 
     # -- I/O --------------------------------------------------------------------------------
     def tick(self, now: float, dt: float) -> None:
         self._accept()
+        if self.tasks is not None:
+            try:
+                self.tasks.tick(now, dt)
+            except Exception as exc:  # a step that raised: the robot stops, the task fails
+                log.exception("command endpoint: the node task raised")
+                self.tasks.cancel(f"{type(exc).__name__}: {exc}")
+                if self.tasks.task is not None:
+                    self.tasks.task.state = "failed"
         for c in list(self.clients):
             self._read(c)
         if now - self._last_status >= STATUS_EVERY_S and self.clients:
@@ -198,6 +272,10 @@ class CommandEndpoint:
         self.clients.remove(c)
         with contextlib.suppress(OSError):
             c.sock.close()
+        if c.commanded and self.tasks is not None and self.tasks.active:
+            self.tasks.cancel("the supervisor that commanded the task disconnected")
+            log.warning("command endpoint: %s (which commanded a node task) is gone: the "
+                        "task is cancelled and the robot stopped", c.address)
         if c.commanded and self.dispatched and not self.mission.over:
             self.mission.hold("the supervisor that commanded the mission disconnected")
             log.warning("command endpoint: %s (which commanded the mission) is gone: the "

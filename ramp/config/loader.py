@@ -37,7 +37,7 @@ from ramp.common.yamlload import (
 )
 from ramp.config.access import AccessConfig, TlsConfig, check_access, check_exposure, check_tls
 from ramp.config.interlocks import check_interlocks
-from ramp.errors import ConfigError, ConfigErrors
+from ramp.errors import ConfigError, ConfigErrors, PluginError
 from ramp.fleetconf import problems as fleet_problems
 from ramp.hal import driver_class
 from ramp.hal.interfaces import Bus
@@ -46,6 +46,7 @@ from ramp.layers.robot_distribution.interlocks import RuleSpec
 from ramp.layers.robot_distribution.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S
 from ramp.modules import module_class
 from ramp.recorder.config import RECORDER_FIELDS, RecorderConfig
+from ramp.registry import PluginLoadError
 from ramp.schema import Block, Field, shorten, validate
 
 #: A module's name is an MCP name (`base:base.get=()`), and `robot` is taken.
@@ -89,6 +90,8 @@ class BusConfig:
     params: Mapping[str, Any]
     sim: bool = True  # replaced by its emulator under --sim
     line: int = 0
+    #: Why its driver's code cannot be loaded (a `PluginError`); "" when it can.
+    broken: str = ""
 
 
 @dataclass(frozen=True)
@@ -108,6 +111,9 @@ class ModuleConfig:
     devices: Mapping[str, DeviceConfig]
     settings: Mapping[str, Mapping[str, Any]]
     line: int = 0
+    #: Why its type's code cannot be loaded, or its bus's driver's (a `PluginError`); ""
+    #: when it can. `ramp run` starts the rest, this module in `fault` for good.
+    broken: str = ""
 
 
 @dataclass(frozen=True)
@@ -138,6 +144,11 @@ class _Checker:
 
     def err(self, key: str, line: int, message: str) -> None:
         self.errors.append(ConfigError(shorten(message, 300), file=self.file, line=line,
+                                       key=shorten(key, 120)))
+
+    def plugin(self, key: str, line: int, message: str) -> None:
+        """A plugin whose code raised at import (see `PluginError`)."""
+        self.errors.append(PluginError(shorten(message, 600), file=self.file, line=line,
                                        key=shorten(key, 120)))
 
     def block(self, parent: LinedMap, key: str, path: str, fields: Mapping[str, Field],
@@ -231,12 +242,17 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
         for key, line, message in fleet_problems(fleet):
             c.err(key, line, message)
     buses, bus_classes = _buses(c, root)
-    modules_errors = len(c.errors)
+    def mistakes() -> int:  # a plugin that cannot load leaves its module's name checkable
+        return sum(not isinstance(e, PluginError) for e in c.errors)
+
+    modules_errors = mistakes()
     modules = _modules(c, root, buses, bus_classes)
     interlocks = check_interlocks(root.get("interlocks"), root.lines.get("interlocks", 1),
-                                  modules, c.err, modules_ok=len(c.errors) == modules_errors)
-    if c.errors:
+                                  modules, c.err, modules_ok=mistakes() == modules_errors)
+    if any(not isinstance(e, PluginError) for e in c.errors):
         return None, c.errors
+    # Only plugins whose code raised: the config is whole (they are marked `broken`), and
+    # `ramp run` may start the rest of the robot; every other caller sees the errors.
     cfg = Config(
         file=name,
         server=ServerConfig(**server, tls=tls),
@@ -250,7 +266,7 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
         interlocks=interlocks,
         access=access,
     )
-    return cfg, []
+    return cfg, list(c.errors)
 
 
 def _access(c: _Checker, root: LinedMap, file: str,
@@ -368,6 +384,12 @@ def _buses(c: _Checker, root: LinedMap) -> tuple[dict[str, BusConfig], dict[str,
             continue
         try:
             cls = driver_class(driver)
+        except PluginLoadError as exc:  # its code raised: `ramp run` starts the rest
+            dline = entry.lines.get("driver", entry.line)
+            c.plugin(f"{path}.driver", dline, str(exc))
+            out[str(name)] = BusConfig(str(name), driver, MappingProxyType({}), True, line,
+                                       broken=str(exc))
+            continue
         except ValueError as exc:
             c.err(f"{path}.driver", entry.lines.get("driver", entry.line), str(exc))
             continue
@@ -424,6 +446,11 @@ def _modules(c: _Checker, root: LinedMap, buses: dict[str, BusConfig],
         type_name = entry.get("type", name)
         try:
             cls = module_class(str(type_name))
+        except PluginLoadError as exc:  # its code raised: `ramp run` starts the rest
+            c.plugin(f"{path}.type", entry.lines.get("type", line), str(exc))
+            out[str(name)] = ModuleConfig(str(name), str(type_name), MappingProxyType({}),
+                                          MappingProxyType({}), entry.line, broken=str(exc))
+            continue
         except ValueError as exc:
             c.err(f"{path}.type", entry.lines.get("type", line), str(exc))
             continue
@@ -466,7 +493,11 @@ def _module(c: _Checker, path: str, name: str, type_name: str, cls: type[Module]
                   f"{shorten(repr(bus))} is not a bus (known: {known})" if bus is not None
                   else f"missing; expected a bus name (known: {known})")
             continue
-        bcls = bus_classes[bus]
+        bcls = bus_classes.get(bus)
+        if bcls is None:  # its driver cannot be loaded (a PluginError): nothing to check
+            devices[dev] = DeviceConfig(dev, bus, spec.kind, MappingProxyType({}),
+                                        MappingProxyType({}), dline)
+            continue
         if spec.kind not in bcls.channel_fields:
             c.err(f"{dpath}.bus", raw.lines.get("bus", raw.line),
                   f"bus {bus} (driver {bcls.driver_name}) has no {spec.kind} channels, which "
@@ -485,5 +516,7 @@ def _module(c: _Checker, path: str, name: str, type_name: str, cls: type[Module]
         used[ident] = f"{name}.{dev}"
         devices[dev] = DeviceConfig(dev, bus, spec.kind, MappingProxyType(channel),
                                     MappingProxyType(params), dline)
+    broken = "; ".join(f"bus {b}: {buses[b].broken}" for b in
+                       sorted({d.bus for d in devices.values()}) if buses[b].broken)
     return ModuleConfig(name, type_name, MappingProxyType(devices), MappingProxyType(settings),
-                        entry.line)
+                        entry.line, broken=broken)

@@ -106,11 +106,12 @@ def run(cfg: fleetconf.FleetConfig, backend: tuple[str, int], *,
     from ramp import __version__
     from ramp.clock import MonotonicClock
     from ramp.common.hostport import format_hostport
+    from ramp.common.state_files import default_state_dir
     from ramp.fleet import vda5050 as v
     from ramp.fleet.agent import Agent, Identity
     from ramp.fleet.mcplink import FleetMcpLink
     from ramp.fleet.mqtt import MqttLink
-    from ramp.fleet.pause import PauseStore, default_state_dir
+    from ramp.fleet.pause import PauseStore
     from ramp.scheduler import Scheduler
 
     log = logging.getLogger("ramp.fleet")

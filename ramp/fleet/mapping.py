@@ -46,8 +46,10 @@ def errors(model: RobotModel, status: RobotStatus) -> list[dict[str, Any]]:
     out = []
     for module, state in sorted(status.module_states.items()):
         if state == "fault":
-            out.append(v.error("moduleFault", v.FATAL, f"module {module} is in fault: its "
-                               "motion is stopped until its device works again",
+            why = status.values.get(f"robot:{module}.reason", ())
+            because = f" ({why[0]})" if why else ""
+            out.append(v.error("moduleFault", v.FATAL, f"module {module} is in fault{because}:"
+                               " its motion is stopped until its device works again",
                                {"module": module}))
         elif state == "detached":
             out.append(v.error("moduleDetached", v.WARNING, f"module {module} is detached "

@@ -4,24 +4,18 @@
 read counts as paused (fail safe: a fleet that paused a robot never loses that by a bad
 disk), with a warning saying so. Writes are atomic (a temporary file renamed over the old).
 The directory is `fleet.state_dir`, `--state-dir`, systemd's `$STATE_DIRECTORY`, or
-`~/.local/state/ramp`, as `ramp run`'s state file.
+`$XDG_STATE_HOME/ramp` (`~/.local/state/ramp`), as `ramp run`'s latch state.
 """
 
 from __future__ import annotations
 
-import contextlib
 import json
 import logging
-import os
-import tempfile
 from pathlib import Path
 
+from ramp.common.state_files import write_atomic
+
 log = logging.getLogger("ramp.fleet.pause")
-
-
-def default_state_dir() -> Path:
-    env = os.environ.get("STATE_DIRECTORY", "").split(":")[0]
-    return Path(env) if env else Path.home() / ".local" / "state" / "ramp"
 
 
 class PauseStore:
@@ -50,14 +44,6 @@ class PauseStore:
         """Record the pause; an OSError is logged (the pause holds in memory regardless)."""
         self.paused, self.reason = paused, reason
         try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=".fleet-", suffix=".tmp")
-            with os.fdopen(fd, "w") as f:
-                json.dump({"paused": paused, "reason": reason}, f)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, self.path)
+            write_atomic(self.path, json.dumps({"paused": paused, "reason": reason}))
         except OSError as exc:
             log.error("cannot record the fleet's pause in %s: %s", self.path, exc)
-            with contextlib.suppress(OSError, UnboundLocalError):
-                os.unlink(tmp)

@@ -101,6 +101,8 @@ class RobotStatus:
                     st.active_interlocks = [str(v) for v in r.values if str(v) != "none"]
                 elif r.prop == "state" and r.device in known:
                     st.module_states[r.device] = first
+                elif r.prop == "reason" and r.device in known:
+                    st.values[f"robot:{r.device}.reason"] = r.values
             else:
                 st.values[f"{r.module}:{r.device}.{r.prop}"] = r.values
         return st

@@ -115,7 +115,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
         for kind in kinds:
             seen[kind] = seen.get(kind, 0) + 1
             serial = f"{kind}-{seen[kind]}"
-            robot = _spawn(f"robot {serial}", ["-m", "ramp.cli", *KINDS[kind]],
+            # each robot keeps its latches apart (two MARTEs share one config file)
+            keep = ["--state-dir", str(work / serial)] if KINDS[kind][0] == "run" else []
+            robot = _spawn(f"robot {serial}", ["-m", "ramp.cli", *KINDS[kind], *keep],
                            work / f"{serial}.log")
             robots.append(robot)
             m = robot.expect(r"(?:MCP|ready) on ([\d.]+):(\d+)")

@@ -34,6 +34,7 @@ bus to its controller's own timeout (`try_stop_motors`).
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import threading
@@ -360,7 +361,16 @@ class Bus(ABC):
             for sv in self.servos:  # hold where it is
                 sv.target = sv.position if math.isfinite(sv.position) else None
             if self.is_open:
-                self._stop_motors()
+                try:
+                    self._stop_motors()
+                except Exception:
+                    # The driver's own stop raised (a bug, or the device failing): zeros
+                    # through its command path, motor by motor, where it can still write;
+                    # then the caller faults the bus, and its close ends the rest.
+                    for m in self.motors:
+                        with contextlib.suppress(Exception):  # the caller faults the bus
+                            self._motor_changed(m)
+                    raise
 
     def try_stop_motors(self, wait: float) -> bool:
         """`stop_motors` from another thread (the stall guard): False, and nothing written,

@@ -73,7 +73,7 @@ class ThompsonActuator:
         self.mode: Mode = "idle"
         self.target: float | None = None
         #: The stall fault: latched by the stall guard, cleared only by a reset.
-        self.latch = FaultLatch("lift")
+        self.latch = FaultLatch("lift", self._stall_cause)
         self._seeking = False  # a move_to still heading for the inner band
         self._ref_pos = 0.0
         self._ref_time: float | None = None  # stall guard reference; None = re-arm next tick
@@ -148,6 +148,13 @@ class ThompsonActuator:
         trip, takeover or re-attach may silently re-arm a jammed lift (`clear_fault`)."""
         self.mode, self.target, self._seeking = "idle", None, False
         self._drive(0)
+
+    def _stall_cause(self) -> str:
+        """What keeps a stall from being checked: a stall itself shows only while driving, but
+        with no position reading the guard that caught it is blind (reset refused)."""
+        if not math.isfinite(self.position):
+            return "the lift's position cannot be read (lift_pot): the stall guard is blind"
+        return ""
 
     def clear_fault(self) -> None:
         """The stall has been seen and acknowledged (the module's `lift.reset=()`)."""

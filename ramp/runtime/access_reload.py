@@ -15,6 +15,7 @@ from types import FrameType
 
 from ramp.config import check_config
 from ramp.config.access import server_context
+from ramp.errors import PluginError
 from ramp.runtime.supervisor import Supervisor
 
 log = logging.getLogger("ramp.access")
@@ -48,7 +49,8 @@ class AccessReloader:
 
     def reload(self) -> None:
         config, errors = check_config(self.path)
-        if errors or config is None:
+        # A plugin that cannot load (PluginError) is already in fault: access still reloads.
+        if config is None or any(not isinstance(e, PluginError) for e in errors):
             log.error("SIGHUP: %s has %d error(s); access unchanged: %s", self.path,
                       len(errors), "; ".join(str(e) for e in errors[:3]))
             return

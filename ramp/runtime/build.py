@@ -11,13 +11,14 @@ layers), the module registry, the watchdog and the robot layer, then the server.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ramp.clock import Clock, MonotonicClock
 from ramp.config import BusConfig, Config
 from ramp.config.access import check_exposure, is_loopback, server_context
-from ramp.errors import ConfigError
+from ramp.errors import ConfigError, DeviceError, RampError
 from ramp.hal import driver_class
 from ramp.hal.interfaces import Bus
 from ramp.layers.module_distribution import BoundDevice, Module
@@ -31,6 +32,8 @@ from ramp.layers.robot_distribution import (
 )
 from ramp.layers.server import McpServer
 from ramp.modules import module_class
+from ramp.registry import origin
+from ramp.registry import where as _where
 from ramp.runtime.buses import BusManager, zeroer
 from ramp.runtime.observers import Observer, fan_out, overridden
 from ramp.runtime.supervisor import Supervisor
@@ -40,6 +43,8 @@ if TYPE_CHECKING:
     from ramp.recorder.recorder import Recorder
 
 BusFactory = Callable[[BusConfig], Bus]
+
+log = logging.getLogger("ramp.supervisor")
 
 
 def default_bus_factory(bc: BusConfig) -> Bus:
@@ -59,19 +64,42 @@ def build(config: Config, clock: Clock | None = None, bus_factory: BusFactory | 
     clock = clock or MonotonicClock()
     scheduler = Scheduler(clock, config.rate_hz, stall_limit=config.stall_limit)
     factory = bus_factory or default_bus_factory
-    buses = {name: factory(bc) for name, bc in config.buses.items()}
+    buses: dict[str, Bus] = {}
+    for name, bc in config.buses.items():
+        buses[name] = _bus(bc, factory)
 
     slots: dict[str, ModuleSlot] = {}
     for name, mc in config.modules.items():
-        devices = {
-            dev: BoundDevice(buses[dc.bus].channel(dc.kind, f"{name}.{dev}", dc.channel),
-                             dc.params)
-            for dev, dc in mc.devices.items()
-        }
-        module: Module = module_class(mc.type)(name, devices, mc.settings)
         used = tuple(sorted({dc.bus for dc in mc.devices.values()}))
-        slot = slots[name] = ModuleSlot(name, module, used)
-        slot.zero = zeroer([d.channel for d in devices.values()])
+        broken = mc.broken or "; ".join(
+            f"bus {b}: {bus.reason}" for b in used
+            if isinstance(bus := buses[b], UnloadedBus))
+        module: Module | None = None
+        channels: list[object] = []
+        if not broken:
+            try:
+                devices = {
+                    dev: BoundDevice(buses[dc.bus].channel(dc.kind, f"{name}.{dev}",
+                                                           dc.channel), dc.params)
+                    for dev, dc in mc.devices.items()
+                }
+                module = module_class(mc.type)(name, devices, mc.settings)
+                channels = [d.channel for d in devices.values()]
+            except RampError:  # a config mistake the module found: a refusal, as always
+                raise
+            except Exception as exc:  # noqa: BLE001 - plugin code: this module's fault only
+                broken = (f"{origin('ramp.modules', mc.type)} raised when built: "
+                          f"{_where(exc)}{type(exc).__name__}: {exc}")
+                log.error("module %s: its module type's code raised when built; the rest of "
+                          "the robot starts without it", name, exc_info=exc)
+        slot = slots[name] = ModuleSlot(name, module or Unloaded(name), used)
+        slot.plugin = origin("ramp.modules", mc.type)
+        slot.zero = zeroer(channels)
+        if module is None:
+            log.error("module %s is in fault for good (fix the plugin and restart): %s",
+                      name, broken)
+            slot.retry_at = math.inf  # never attached: its code is not there
+            slot.fail(0.0, broken)
     registry = ModuleRegistry(slots)
 
     # The layers call back into the supervisor, which is made last (it holds them all).
@@ -111,6 +139,62 @@ def build(config: Config, clock: Clock | None = None, bus_factory: BusFactory | 
     if observer is not None:
         _connect(sup, observer)
     return sup
+
+
+class Unloaded(Module):
+    """What stands in for a module whose plugin could not be loaded or built: no devices,
+    nothing to move, in `fault` for good (its requests answer `fault` with the reason)."""
+
+    def stop(self) -> None:
+        pass
+
+    def is_moving(self) -> bool:
+        return False
+
+
+class UnloadedBus(Bus):
+    """What stands in for a bus whose driver could not be loaded or built: it never opens
+    (every retry says why), and the modules on it are in `fault` for good."""
+
+    driver_name = "unloaded"
+
+    def __init__(self, name: str, reason: str) -> None:
+        super().__init__(name, {})
+        self.reason = reason
+
+    def _make_channel(self, kind: str, label: str, spec: dict[str, Any]) -> Any:
+        raise ConfigError(f"bus {self.name} has no driver: {self.reason}", key=label)
+
+    def _open(self, now: float) -> None:
+        raise DeviceError(self.name, self.reason)
+
+    def _tick(self, now: float, dt: float) -> None:
+        pass
+
+    def _stop_motors(self) -> None:
+        pass
+
+    def _close(self) -> None:
+        pass
+
+
+def _bus(bc: BusConfig, factory: BusFactory) -> Bus:
+    """Bus `bc` built by `factory`; a driver whose code cannot be loaded, or raises when
+    built, is an `UnloadedBus` (SPEC 2.2: the rest of the robot starts), reported by its
+    distribution and entry point."""
+    if bc.broken:
+        log.error("bus %s: %s; the rest of the robot starts without it", bc.name, bc.broken)
+        return UnloadedBus(bc.name, bc.broken)
+    try:
+        return factory(bc)
+    except RampError:  # a config mistake the driver found (or the sim driver off --sim)
+        raise
+    except Exception as exc:  # noqa: BLE001 - plugin code: this bus's fault only
+        reason = (f"{origin('ramp.drivers', bc.driver)} raised when built: {_where(exc)}"
+                  f"{type(exc).__name__}: {exc}")
+        log.error("bus %s: its driver's code raised when built; the rest of the robot starts "
+                  "without it", bc.name, exc_info=exc)
+        return UnloadedBus(bc.name, reason)
 
 
 def _connect(sup: Supervisor, observer: Observer) -> None:

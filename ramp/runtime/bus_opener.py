@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 from ramp.errors import DeviceError
 from ramp.hal.interfaces import Bus
+from ramp.registry import origin
 
 log = logging.getLogger("ramp.supervisor")
 
@@ -48,8 +49,9 @@ class BusOpener:
     def __init__(self, inline: bool) -> None:
         self.inline = inline
         self._attempts: dict[str, _Attempt] = {}
-        #: Driver bugs in `open` already logged with their traceback: (bus, type, message).
-        self._bugs: set[tuple[str, str, str]] = set()
+        #: Driver bugs in `open` already logged with their traceback in this fault episode:
+        #: (bus, exception type); the message may carry a counter or a time.
+        self._bugs: set[tuple[str, str]] = set()
 
     def busy(self, name: str) -> bool:
         """An open of this bus is in flight: nobody else may touch the bus."""
@@ -81,32 +83,40 @@ class BusOpener:
         del self._attempts[name]
         return attempt.error
 
+    def forget(self, name: str) -> None:
+        """Bus `name`'s fault episode is over: its next bug in `open` logs a traceback."""
+        for key in [k for k in self._bugs if k[0] == name]:
+            self._bugs.discard(key)
+
     def cancel_all(self) -> None:
         """Shutting down: an open that completes later closes its bus again."""
         for attempt in self._attempts.values():
             attempt.cancelled = True
 
     @staticmethod
-    def _run(attempt: _Attempt, now: float, bugs: set[tuple[str, str, str]]) -> None:
+    def _run(attempt: _Attempt, now: float, bugs: set[tuple[str, str]]) -> None:
         attempt.error = _open(attempt.bus, now, bugs)
         if attempt.cancelled and attempt.error is None:
-            attempt.bus.close()
+            _close(attempt.bus)
         attempt.done.set()
 
 
-def _open(bus: Bus, now: float, bugs: set[tuple[str, str, str]]) -> DeviceError | None:
+def _open(bus: Bus, now: float, bugs: set[tuple[str, str]]) -> DeviceError | None:
     try:
         bus.open(now)
     except DeviceError as exc:
         _close(bus)
         return exc
     except Exception as exc:  # noqa: BLE001 - a driver bug must not kill the loop or thread
-        key = (bus.name, type(exc).__name__, str(exc))
-        if key not in bugs:  # the traceback once, not at every retry
+        key = (bus.name, type(exc).__name__)
+        if key not in bugs:  # the traceback once per fault episode, not at every retry
             bugs.add(key)
-            log.exception("bus %s (%s): open raised", bus.name, bus.driver_name)
+            log.error("bus %s: the driver raised in open (%s); retrying every second, the "
+                      "rest keep running", bus.name, origin("ramp.drivers", bus.driver_name),
+                      exc_info=exc)
         _close(bus)
-        return DeviceError(bus.name, f"open failed: {type(exc).__name__}: {exc}")
+        return DeviceError(bus.name, f"open failed: {type(exc).__name__}: {exc} in "
+                                     f"{origin('ramp.drivers', bus.driver_name)}")
     return None
 
 

@@ -6,10 +6,15 @@ finds its descriptor readable), the bus is closed and retried about once a secon
 module registry faults every module that uses it (`ramp.layers.robot_distribution.registry`:
 entering `fault` stops the module and logs). A request never sees an I/O error.
 
-**A bug in one driver is one bus's fault** (SPEC 2.2). Any other exception out of a driver
-(its tick, its input handler, its readiness, its close) takes the same route: that bus is
-faulted and retried, the rest keep ticking and serving. Its traceback is logged once per
-bus and bug, not at every tick or retry; a repeat after a reopen is one quiet line.
+**A bug in one driver is one bus's fault** (SPEC 2.2: plugin code is untrusted on the safety
+path). Any other exception out of a driver, wherever the loop calls into it (its open, tick,
+input handler, readiness, `waiting`, descriptor, a command, a stop, its close), takes the
+same route: that bus is faulted (its close puts zeros on its motors where it still can
+write, and the port is closed either way), its modules go to `fault` with their motion
+stopped, it is retried as in hot plug, and the rest keep ticking and serving. Its traceback
+is logged once per fault episode and place (`where`, exception type: a message that carries
+a counter or a time is the same bug), not at every tick or retry; a repeat is one quiet
+line. An episode ends once the bus has been ready for `QUIET_S`.
 
 A bus with a descriptor (`Bus.fileno()`: a serial port, a CAN socket) is watched by the loop
 while it is open, so a hang-up or input is handled the moment it happens instead of being
@@ -24,12 +29,15 @@ from dataclasses import dataclass, field
 
 from ramp.errors import DeviceError
 from ramp.hal.interfaces import Bus, MotorChannel, ServoChannel
+from ramp.registry import origin
 from ramp.runtime.bus_opener import BusOpener
 from ramp.scheduler import Scheduler
 
 log = logging.getLogger("ramp.supervisor")
 
 RETRY_PERIOD = 1.0  # seconds between attempts to reopen a missing device
+#: A bus ready this long (s) ends its fault episode: its next driver bug logs a traceback.
+QUIET_S = 30.0
 
 #: Observer hook: (bus, reason, clock time) when a bus fails and is closed.
 FaultHook = Callable[[str, str, float], None]
@@ -42,8 +50,11 @@ class BusHealth:
     reason: str = "not opened yet"
     next_retry: float = 0.0
     faults: int = 0
-    #: Driver bugs already logged with their traceback: (exception type, message).
+    #: Driver bugs already logged with their traceback in this fault episode: (where,
+    #: exception type); the message is left out, since it may carry a counter or a time.
     bugs: set[tuple[str, str]] = field(default_factory=set)
+    #: Clock time the bus last became ready (its fault episode ends QUIET_S after).
+    ready_since: float = 0.0
 
 
 def zeroer(channels: list[object]) -> Callable[[], None]:
@@ -89,6 +100,8 @@ class BusManager:
         self._told: dict[str, str] = {}
         self._down: set[str] = set()
         self._watched: dict[str, int] = {}
+        #: A closed bus's reason changed (a reopen failed otherwise): the next refresh tells.
+        self._reasons_changed = False
         for bus in self.buses.values():
             bus.gate = scheduler.on_time  # motion computed before a stall never goes out
 
@@ -111,15 +124,27 @@ class BusManager:
         self._refresh(now, force=True)
 
     def settled(self) -> bool:
-        """Every open bus answers (boards that attach asynchronously included)."""
-        return all(b.ready() for b in self.buses.values() if b.is_open)
+        """Every open bus answers (boards that attach asynchronously included); a driver
+        whose readiness raises is faulted by the next refresh, and counts as settled."""
+        for bus in self.buses.values():
+            try:
+                if bus.is_open and not bus.ready():
+                    return False
+            except Exception:  # noqa: BLE001 - a driver bug: faulted by `_refresh`
+                continue
+        return True
 
     def close_all(self) -> None:
-        """Zeros on every wire, then every port closes. Idempotent."""
+        """Zeros on every wire, then every port closes. Idempotent; a driver that raises
+        while closing never keeps the other buses open."""
         self.opener.cancel_all()
         for name, bus in self.buses.items():
             self._unwatch(name)
-            bus.close()
+            try:
+                bus.close()
+            except Exception as exc:  # noqa: BLE001 - every other bus must still close
+                log.error("bus %s (%s): the driver raised while closing: %s: %s", name,
+                          bus.driver_name, type(exc).__name__, exc)
 
     def any_open(self) -> bool:
         return any(b.is_open for b in self.buses.values())
@@ -142,25 +167,36 @@ class BusManager:
             self._refresh(now)
 
     def retry(self, now: float, dt: float) -> None:
-        """About once a second: reopen what is closed."""
+        """About once a second: reopen what is closed; end the fault episodes of buses that
+        have been ready for QUIET_S."""
         for name, bus in self.buses.items():
+            health = self.health[name]
             if (not bus.is_open and not self.opener.busy(name)
-                    and now >= self.health[name].next_retry):
+                    and now >= health.next_retry):
                 self._try_open(name, bus, now)
+            elif health.bugs and self._ready[name] and now - health.ready_since >= QUIET_S:
+                self._quiet(name, bus)
         self._refresh(now)
+
+    def _quiet(self, name: str, bus: Bus) -> None:
+        """Bus `name`'s fault episode is over: its next bug logs its traceback again."""
+        self.health[name].bugs.clear()
+        self.opener.forget(name)
+        bus._bug_logged = False
 
     # -- faults -------------------------------------------------------------------------------
     def driver_bug(self, name: str, exc: Exception, where: str, now: float) -> None:
         """An unexpected exception out of bus `name`'s driver: its traceback once, then the
         device-fault route (the bus closes, is retried, its modules fault)."""
         bus = self.buses[name]
-        key = (type(exc).__name__, str(exc))
+        key = (where, type(exc).__name__)
         health = self.health[name]
-        detail = f"driver error in {where}: {key[0]}: {key[1]}".rstrip(": ")
+        detail = f"driver error in {where}: {key[1]}: {exc}".rstrip(": ")
         if key not in health.bugs:
             health.bugs.add(key)
-            log.error("bus %s (%s): the driver raised in %s; the bus is faulted and retried, "
-                      "the other buses keep running", name, bus.driver_name, where,
+            log.error("bus %s: the driver raised in %s (%s); the bus is faulted and "
+                      "retried, the other buses keep running (its traceback is logged once "
+                      "per fault episode)", name, where, origin("ramp.drivers", bus.driver_name),
                       exc_info=exc)
             self.fault(name, DeviceError(name, detail), now)
         else:
@@ -179,22 +215,34 @@ class BusManager:
         try:
             self.buses[name].close()
         except Exception as bug:  # noqa: BLE001 - a closing bug must not stop the fault
-            if not quiet:
-                log.error("bus %s: the driver raised while closing", name, exc_info=bug)
+            key = ("close", type(bug).__name__)
+            if key not in health.bugs:  # once per fault episode, as any driver bug
+                health.bugs.add(key)
+                log.error("bus %s (%s): the driver raised while closing (its port is "
+                          "treated as closed)", name, self.buses[name].driver_name,
+                          exc_info=bug)
         if self.on_fault is not None:
             self.on_fault(name, exc.detail, now)
-        self._refresh(now)
+        self._refresh(now, force=True)  # its modules' reasons say the fault's own
 
     # -- stops --------------------------------------------------------------------------------
     def zeros_everywhere(self) -> None:
-        """Zeros on every open wire now (the stall handler's first act)."""
+        """Zeros on every open wire now (the stall handler's first act). A driver that
+        cannot write them is faulted: its port is closed (after the other buses stopped)."""
+        broken: list[tuple[str, Exception]] = []
         for name, bus in self.buses.items():
             if not bus.is_open:
                 continue
             try:
                 bus.stop_motors()
             except Exception as exc:  # noqa: BLE001 - every other bus must still stop
-                log.error("bus %s: could not stop motors: %s", name, exc)
+                broken.append((name, exc))
+        now = self.clock.now()
+        for name, raised in broken:
+            if isinstance(raised, DeviceError):
+                self.fault(name, raised, now)
+            else:
+                self.driver_bug(name, raised, "stop_motors", now)
 
     def zeros_from_another_thread(self, lock_wait: float) -> None:
         """The stall guard's last resort: zeros through every driver the loop is not inside
@@ -210,24 +258,30 @@ class BusManager:
     # -- internals ----------------------------------------------------------------------------
     def _refresh(self, now: float, force: bool = False) -> None:
         """Tell the registry when a bus's readiness changed (boards attach, buses fail)."""
-        changed = force
-        buggy: list[tuple[str, Exception]] = []
+        changed = force or self._reasons_changed
+        self._reasons_changed = False
+        buggy: list[tuple[str, str, Exception]] = []
         for name, bus in self.buses.items():
             try:
                 ready = bus.is_open and bus.ready()
             except Exception as bug:  # noqa: BLE001 - a driver bug: faulted below
                 ready = False
-                buggy.append((name, bug))
+                buggy.append((name, "ready", bug))
             if ready != self._ready[name]:
                 self._ready[name] = ready
                 changed = True
                 if ready:
+                    self.health[name].ready_since = now
                     self._told.pop(name, None)
                     if name in self._down:
                         self._down.discard(name)
                         log.info("bus %s is back", name)
             elif not ready and bus.is_open:
-                waiting = bus.waiting()
+                try:
+                    waiting = bus.waiting()
+                except Exception as bug:  # noqa: BLE001 - a driver bug: faulted below
+                    buggy.append((name, "waiting", bug))
+                    continue
                 if waiting and self._told.get(name) != waiting:
                     self._told[name] = waiting
                     self._down.add(name)
@@ -239,8 +293,9 @@ class BusManager:
         self._waiting = any(b.is_open and not self._ready[n] for n, b in self.buses.items())
         if changed:
             self._on_change(now)
-        for name, raised in buggy:
-            self.driver_bug(name, raised, "ready", now)
+        for name, where, raised in buggy:
+            if self.buses[name].is_open:  # not already faulted by an earlier one
+                self.driver_bug(name, raised, where, now)
 
     def _try_open(self, name: str, bus: Bus, now: float) -> bool:
         """Open a bus without holding the loop (see `ramp.runtime.bus_opener`); True once it
@@ -253,6 +308,7 @@ class BusManager:
         if isinstance(result, DeviceError):
             self._down.add(name)
             if health.reason != result.detail:
+                self._reasons_changed = True  # its modules' reasons say the new one
                 log.warning("bus %s (%s) unavailable: %s; retrying every %.0f s", name,
                             bus.driver_name, result.detail, RETRY_PERIOD)
             health.reason = result.detail
@@ -262,7 +318,12 @@ class BusManager:
         # Open is not ready (a Phidget board attaches later, if it is there at all): "back"
         # and "waiting" are said by `_refresh` when the bus's readiness shows it.
         log.debug("bus %s (%s) open", name, bus.driver_name)
-        self._watch(name, bus)
+        try:
+            fd = bus.fileno()
+        except Exception as bug:  # noqa: BLE001 - a driver bug: this bus's fault
+            self.driver_bug(name, bug, "fileno", now)
+            return False
+        self._watch(name, bus, fd)
         self._waiting = True  # is it ready yet? the next refresh says
         return True
 
@@ -272,14 +333,8 @@ class BusManager:
             if self.opener.busy(name):
                 self._try_open(name, bus, now)
 
-    def _watch(self, name: str, bus: Bus) -> None:
+    def _watch(self, name: str, bus: Bus, fd: int | None) -> None:
         """Wait on the bus's descriptor in the loop while it is open."""
-        try:
-            fd = bus.fileno()
-        except Exception:  # noqa: BLE001 - a driver bug: no descriptor, ticks still run
-            log.exception("bus %s (%s): fileno raised; its input is polled in its tick",
-                          name, bus.driver_name)
-            fd = None
         if fd is None:
             return
         self._watched[name] = fd

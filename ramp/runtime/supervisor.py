@@ -26,6 +26,7 @@ from ramp.layers.robot_distribution import (
 from ramp.layers.server import McpServer
 from ramp.mcp.messages import Response
 from ramp.runtime.buses import BusManager
+from ramp.runtime.latch_state import CHECK_HZ, LatchState
 from ramp.runtime.observers import Observer
 from ramp.runtime.stall_guard import StallGuard
 from ramp.scheduler import Scheduler
@@ -55,6 +56,8 @@ class Supervisor:
         self.recorder = recorder
         self._log_handler: logging.Handler | None = None
         self.stall_guard = StallGuard(self, config.stall_limit)
+        #: Latches kept across restarts (`ramp run --state-dir`); None keeps them in memory.
+        self.latch_state: LatchState | None = None
         self.started_at = 0.0
         self.running = False
 
@@ -97,8 +100,11 @@ class Supervisor:
         self.started_at = now
         if self.recorder is not None:
             self._start_recorder(now)
-        self.bus_manager.start(now)
         sched = self.scheduler
+        if self.latch_state is not None:  # before any bus opens: nothing moves unlatched
+            self.latch_state.restore(self.slots, self.robot.interlocks)
+            sched.add_task("latches", self._divisor_rate(CHECK_HZ), self.latch_state.check)
+        self.bus_manager.start(now)
         sched.add_task("buses", sched.rate_hz, self.bus_manager.tick)
         sched.add_task("watchdog", sched.rate_hz, self.robot.tick)
         interlocks = self.robot.interlocks
@@ -156,6 +162,8 @@ class Supervisor:
             self.robot.stop_all("shutdown", self.clock.now())
             self.bus_manager.close_all()  # zeros on the wire first, then the ports close
             self.server.close()
+            if self.latch_state is not None:  # a latch of the last moments is kept too
+                self.latch_state.check(self.clock.now(), 0.0)
         self._close_recorder()
 
     # -- the flight recorder ------------------------------------------------------------------

@@ -36,9 +36,7 @@ import sys
 import time
 import traceback
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
-from multiprocessing import get_context
 from typing import Any
 
 from ramp.common.hostport import parse_hostport
@@ -191,6 +189,11 @@ def run_campaign(specs: Sequence[RunSpec], *, workers: int | None = None,
 
 def _run_locally(specs: Sequence[RunSpec], workers: int,
                  on_result: Callable[[dict[str, Any]], None] | None) -> list[dict[str, Any]]:
+    # Imported here: `ramp run` builds every subcommand's parser, this one's too, and the
+    # process pool's modules are 4 MB of a supervisor that never runs a campaign.
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from multiprocessing import get_context
+
     rows = []
     # spawn: each worker starts from a fresh interpreter (no inherited sockets, threads or
     # state), so a run is the same whether it is the first or the hundredth in its process.

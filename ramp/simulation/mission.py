@@ -242,7 +242,8 @@ class MissionRun:
         tracker = self.autonomy.kit.tracker
         self.commands = CommandEndpoint(self.autonomy.mission, pose=tracker.estimate,
                                         confidence=lambda: tracker.confidence,
-                                        now=self.clock.now, port=self.options.command_port)
+                                        now=self.clock.now, port=self.options.command_port,
+                                        kit=self.autonomy.kit)
         self.scheduler.add_task("autonomy.commands", 20.0, self.commands.tick)
 
     def run(self) -> dict[str, Any]:

@@ -94,7 +94,10 @@ class SimModule(Module):
         self.backplane.unplug(self._simulated_bus(bus))
 
     def _plug(self, bus: str) -> None:
-        self.backplane.plug(self._simulated_bus(bus))
+        bus = self._simulated_bus(bus)
+        if bus in self.backplane.dead:
+            raise _bad(f"bus {bus} stays dead: the emulator part behind it faulted")
+        self.backplane.plug(bus)
 
     def _input_set(self, module: str, device: str, value: float) -> None:
         label, kind = self._input(module, device)

@@ -97,7 +97,7 @@ def raised(i: Inputs) -> list[Alert]:
                          "this console moved; the console reconnects by itself and nothing "
                          "resumes without you. Check the network and that `ramp run` is up."))
     for module, state in sorted(i.states.items()):
-        why = i.errors.get(module, "")
+        why = i.errors.get(module, "") or i.values.get(f"robot:{module}.reason", "")
         if state == "fault":
             out.append(Alert(f"module:{module}", "error", f"Module {module} in fault",
                              f"{why + '. ' if why else ''}Its motion is stopped and its "

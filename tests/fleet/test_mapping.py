@@ -73,11 +73,14 @@ def test_battery_charge_or_a_marked_unknown() -> None:
 def test_errors_faults_latches_and_interlock_levels() -> None:
     m = marte()
     s = status(m, "robot:base.state=(ok)robot:ble.state=(fault)"
+                  "robot:ble.reason=(bus ble_motors: no answer)"
                   "robot:interlock.active=(digging_creep,bin_up_slow,bumper)"
                   "ble:lift.stalled=(1)")
     errs = mapping.errors(m, s)
     kinds = [(e["errorType"], e["errorLevel"]) for e in errs]
     assert ("moduleFault", "FATAL") in kinds and ("latchedFault", "FATAL") in kinds
+    [fault] = [e for e in errs if e["errorType"] == "moduleFault"]
+    assert "module ble is in fault (bus ble_motors: no answer)" in fault["errorDescription"]
     levels = {e["errorReferences"][0]["referenceValue"]: e["errorLevel"] for e in errs
               if e["errorType"] == "interlockActive"}
     assert levels == {"bin_up_slow": "WARNING", "bumper": "FATAL"}  # info rules: not errors

@@ -1,7 +1,7 @@
 """The autonomy's command endpoint (ramp/autonomy/command.py) over a real loopback socket,
 on a mission in a scripted world: the mission waits for rmcMission, a bad line is answered
-in words, node-by-node commands are refused, and a client that commanded the mission and
-vanishes leaves it held."""
+in words, node tasks are refused without the executive's kit, and a client that commanded
+the mission and vanishes leaves it held."""
 
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ def test_the_endpoint_holds_until_rmc_mission_and_after_its_commander_goes() -> 
         run.run(10.0)
         assert run.mission.state == "paused" and run.mission.held == WAITING_FOR_ORDER
         assert ask(c, ep, b"not json")["error"] == "not a JSON line"
-        assert "node-by-node" in ask(c, ep, b'{"cmd": "goto", "x": 1}')["error"]
+        assert "without node tasks" in ask(c, ep, b'{"cmd": "goto", "x": 1}')["error"]
         status = ask(c, ep, b'{"cmd": "status"}')["status"]
         assert status["pose"] == {"x": 1.0, "y": 2.0, "yaw": 0.5} and not status["started"]
         t[0] = 10.0

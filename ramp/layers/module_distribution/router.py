@@ -210,7 +210,8 @@ class Module(ABC):
         """Declare `device`'s latched fault (`latch`: a `FaultLatch`, tripped by the device's
         component): adds `DEVICE.reset=()` (kind `state`) and the get row `DEVICE.PROP=(0|1)`,
         and refuses every motion function of the device (and of the devices in `guards`,
-        such as a module-wide drive using it) with `fault` while it is latched."""
+        such as a module-wide drive using it) with `fault` while it is latched. The reset is
+        refused with `fault` while the latch's `cause` still reads true (SPEC 2.2)."""
         latch.label = f"{self.name}:{device}"
         self.latches[device] = latch
         for d in (device, *guards):
@@ -218,7 +219,13 @@ class Module(ABC):
         for fn in list(self.functions.values()):
             if fn.device in (device, *guards):
                 self.add(fn)
+
         def reset(ctx: Any = None) -> None:
+            still = getattr(latch, "still_there", None)
+            why = still() if still is not None and latch.latched else ""
+            if why:
+                raise RequestError("fault", f"{latch.label} stays latched: {why}; reset it "
+                                            "once that is fixed")
             latch.clear(getattr(getattr(ctx, "client", None), "peer", ""))
 
         self.add(Function(device, "reset", (), reset, "state",

@@ -338,6 +338,8 @@ class Interlocks:
         self._thresholds = []
         #: Rules released outside a tick (by a request or a reset): evaluated at the next.
         self._recheck: dict[int, Rule] = {}
+        #: Counts every latch and reset of a rule (the latch state file follows it).
+        self.latch_changes = 0
         self._prop_index: dict[str, int] = {}
         #: Per guarded function: the properties its rules read.
         self._guard_props: dict[tuple[str, str, str], tuple[int, ...]] = {}
@@ -530,8 +532,9 @@ class Interlocks:
             rule.clear_since = None
             if not unreadable:
                 rule.seen_true = True
-                if rule.spec.latch:
+                if rule.spec.latch and not rule.latched:
                     rule.latched = True
+                    self.latch_changes += 1
         elif rule.clear_since is None:
             rule.clear_since = now
         # Released only once clear for RELEASE_AFTER_S: a reading hovering at the threshold
@@ -760,10 +763,30 @@ class Interlocks:
         if verdict == HOLDS:
             return f"{name}: its condition still holds; reset once it has cleared"
         rule.latched = False
+        self.latch_changes += 1
         rule.clear_since = -math.inf  # acknowledged: released now
         log.info("interlock %s reset", name)
         self.update(rule, now)
         return None
+
+    def restore_latched(self, names: Sequence[str]) -> list[str]:
+        """Latch the latching rules in `names` (kept across a restart, SPEC 2.2): active from
+        the next evaluation until reset. Returns the names this config has no latching rule
+        for."""
+        unknown = []
+        for name in names:
+            rule = self.by_name.get(name)
+            if rule is None or not rule.spec.latch:
+                unknown.append(name)
+                continue
+            if not rule.latched:
+                rule.latched = True
+                self.latch_changes += 1
+            self._recheck[rule.order] = rule
+        return unknown
+
+    def latched_names(self) -> tuple[str, ...]:
+        return tuple(r.name for r in self.rules if r.latched)
 
     def active_names(self) -> tuple[str, ...]:
         return tuple(r.name for r in self.rules if r.active)

@@ -22,6 +22,7 @@ episode ends once the module has run `QUIET_S` without one.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Mapping
 from typing import Any, Literal
 
@@ -46,7 +47,8 @@ def _nothing() -> None:
 STATES: tuple[ModuleState, ...] = ("detached", "ok", "fault")
 TRANSITIONS: list[Any] = [
     {"trigger": "attach", "source": ["detached", "fault"], "dest": "ok", "before": "_leaving"},
-    {"trigger": "fail", "source": "ok", "dest": "fault"},
+    # from `detached` only for a module whose plugin could not be built (ramp.runtime.build)
+    {"trigger": "fail", "source": ["ok", "detached"], "dest": "fault"},
 ]
 
 #: Observer hook: (module, new state, reason, clock time) after every change of state.
@@ -77,6 +79,9 @@ class ModuleSlot:
         #: builder): how its motion is stopped whatever its own `stop` does.
         self.zero: Callable[[], None] = _nothing
         self._start_bug: Exception | None = None
+        #: Who provides its module type (`ramp.registry.origin`), named when its code
+        #: raises (set by the builder).
+        self.plugin = ""
         #: Observer hook (the flight recorder): None costs nothing.
         self.on_change: ModuleStateHook | None = None
         self._machine = Machine(model=self, states=list(STATES), transitions=TRANSITIONS,
@@ -111,10 +116,13 @@ class ModuleSlot:
         zeroed on the wire, the traceback once per episode, attached again after RETRY_S."""
         key = (where.split(" ", 1)[0], type(exc).__name__)
         text = f"{where} raised {type(exc).__name__}: {exc}".rstrip(": ")
+        if where == "start" and self.plugin:  # at attach: name the plugin, as at boot
+            text = f"{text} in {self.plugin}"
         if key not in self.bugs:
             self.bugs.add(key)
-            log.error("module %s: %s; the module is faulted and retried every %.0f s, the "
-                      "rest keep running", self.name, text, RETRY_S, exc_info=exc)
+            log.error("module %s (%s): %s; the module is faulted and retried every %.0f s, "
+                      "the rest keep running", self.name, self.plugin or "no plugin", text,
+                      RETRY_S, exc_info=exc)
         self.retry_at = max(self.retry_at, now + RETRY_S)
         if self.state == "ok":
             self.fail(now, text)
@@ -148,6 +156,8 @@ class ModuleRegistry:
         """Attach every module whose buses are all ready; fault every attached one that has
         lost one (`why(bus)` says what is wrong with a bus)."""
         for slot in self.slots.values():
+            if slot.retry_at == math.inf:  # faulted for good: its reason stays
+                continue
             down = [b for b in slot.buses if not ready(b)]
             if not down:
                 if slot.state != "ok" and now >= slot.retry_at:

@@ -34,7 +34,7 @@ from ramp.layers.robot_distribution.control import Control
 from ramp.layers.robot_distribution.interlocks import Interlocks, speed_param
 from ramp.layers.robot_distribution.registry import ModuleRegistry, ModuleSlot
 from ramp.layers.robot_distribution.watchdog import MAX_TIMEOUT_S, MIN_TIMEOUT_S, Watchdog
-from ramp.mcp.messages import Request, Response, Value, error_response
+from ramp.mcp.messages import Request, Response, Value, clean_detail, error_response
 from ramp.mcp.params import FloatParam, NameParam
 from ramp.mcp.protocol import format_response
 
@@ -174,6 +174,8 @@ class RobotDistribution:
         #: Clock time of the last tick or request: when a plugin bug met outside both is
         #: dated.
         self.now = 0.0
+        #: Read functions that raised, logged once: (module, device, function, type).
+        self._broken_reads: set[tuple[str, str, str, str]] = set()
 
     @property
     def version(self) -> Version:
@@ -213,9 +215,15 @@ class RobotDistribution:
         kind = fn.kind
         if kind == "read":
             line = fn.line
-            if line is not None:
-                return line((self._ticks.ticks, self.changes))
-            return answer(fn.run(ctx, *values) if fn.takes_context else fn.run(*values))
+            try:
+                if line is not None:
+                    return line((self._ticks.ticks, self.changes))
+                return answer(fn.run(ctx, *values) if fn.takes_context else fn.run(*values))
+            except RequestError as exc:
+                return _error(req, exc.code, exc.detail)
+            except Exception as exc:  # noqa: BLE001 - a plugin's read costs its own answer
+                self._read_failed(req, exc)
+                return _error(req, "fault", f"internal error {type(exc).__name__}")
         audit = self.on_audit
         if ctx.client.role != "admin":  # SPEC 13: what the sender's role permits
             refusal = forbidden(ctx.client.role, kind, module in self.extra)
@@ -277,6 +285,16 @@ class RobotDistribution:
         if audit is not None:
             audit(ctx.client, req, "accepted", ctx.now)
         return answer(result) if result else b""
+
+    def _read_failed(self, req: Request, exc: Exception) -> None:
+        """A read function raised: nothing moves on a read, so the module keeps working and
+        only this answer is an error; the traceback is logged once per function."""
+        key = (req.module, req.device, req.function, type(exc).__name__)
+        if key not in self._broken_reads:
+            self._broken_reads.add(key)
+            log.error("%s:%s.%s raised (logged once; it answers fault while it raises, the "
+                      "module keeps working)", req.module, req.device, req.function,
+                      exc_info=exc)
 
     def _unusable(self, req: Request, slot: ModuleSlot | None) -> bytes:
         """A request to a module that is unknown, or not attached (SPEC 2's order)."""
@@ -470,8 +488,10 @@ class RobotDistribution:
         ]
         active = self.interlocks.active_names()
         rows.append(Response("robot", "interlock", "active", active or ("none",)))
-        rows.extend(Response("robot", name, "state", (slot.state,))
-                    for name, slot in self.slots.items())
+        for name, slot in self.slots.items():
+            rows.append(Response("robot", name, "state", (slot.state,)))
+            if slot.state != "ok" and slot.reason:  # why, beside the state (SPEC 2.3)
+                rows.append(Response("robot", name, "reason", (clean_detail(slot.reason),)))
         if client is not None:
             rows.append(Response("robot", "access", "me", (client.identity, client.role)))
         if self.access_mode is not None:
