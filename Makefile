@@ -90,6 +90,7 @@ SAFETY_SUITES := tests/hil_sim/test_safety.py tests/hil_sim/test_safety_model.py
 	tests/hil_sim/test_commanders.py \
 	tests/hil_sim/test_interlocks.py tests/hil_sim/test_scout_interlocks.py \
 	tests/hil_sim/test_stalls.py tests/hil_sim/test_driver_bugs.py \
+	tests/hil_sim/test_plugin_bugs.py \
 	tests/hil_sim/test_room_for_a_stop.py tests/unit/test_scheduler.py \
 	tests/unit/test_sabertooth_driver.py tests/unit/test_odrive_driver.py \
 	tests/unit/test_phidget_driver.py

@@ -158,10 +158,9 @@ def test_the_operator_sees_the_mission_and_takes_over_from_an_error_alert_then_h
                 expect(page.get_by_test_id("autonomy-state")).to_contain_text(
                     "cross_to_dig", timeout=120_000)
                 time.sleep(3)
-            # Blind the LIDAR. sim requests are owner-only while the autonomy owns control,
-            # so as a trainer would: take control, blind, hand back in one message.
-            assert mcp.request("robot:control.acquire=(trainer)sim:lidar.blind=(1)"
-                               "robot:control.release=()") == []
+            # Blind the LIDAR, as a trainer would while the autonomy holds control: `sim`
+            # requests act on the world and are exempt from control arbitration (SPEC 12).
+            assert mcp.request("sim:lidar.blind=(1)") == []
             error = page.locator('[data-testid="alert"][data-severity="error"]').first
             expect(error).to_be_visible(timeout=60_000)
             expect(error).to_contain_text(re.compile("Localization lost|waiting for the "
