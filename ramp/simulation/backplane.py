@@ -93,16 +93,23 @@ class SimBackplane:
         self.signals = World([world] if world is not None else [])
         #: (part, module) for each module whose emulator made that part.
         self._part_modules: list[tuple[Any, str]] = []
+        #: Buses whose emulator part faulted: dead for good (`plug` leaves them unplugged).
+        self.dead: set[str] = set()
         for name, mc in config.modules.items():
             key = f"module.{mc.type}"
             if key in emulators():
-                part = emulators().load(key)(self, name, mc)
+                try:
+                    part = emulators().load(key)(self, name, mc)
+                except Exception:  # noqa: BLE001 - plugin code: that module's buses, not the run
+                    log.exception("sim: the %s emulator (ramp.emulators entry %s) of module %s "
+                                  "failed to load or build; its buses start dead, the rest "
+                                  "of the world runs", mc.type, key, name)
+                    self.dead.update(dc.bus for dc in mc.devices.values() if dc.bus)
+                    continue
                 if part is not None:
                     self.signals.add(part)
                     self._part_modules.append((part, name))
         self.signals.on_part_fault = self._part_faulted
-        #: Buses whose emulator part faulted: dead for good (`plug` leaves them unplugged).
-        self.dead: set[str] = set()
         #: The model the tests and the rig inspect: MARTE's when there is one, else the world.
         self.world = self._shared.get("marte", self.signals)
 
@@ -148,6 +155,12 @@ class SimBackplane:
         if not bc.sim:
             log.info("bus %s keeps its real %s driver (sim: false)", bc.name, bc.driver)
             return default_bus_factory(bc)
+        bus = self._bus(bc)
+        if bc.name in self.dead:  # its module's emulator failed at start: as if unplugged
+            self.unplug(bc.name)
+        return bus
+
+    def _bus(self, bc: BusConfig) -> Bus:
         key = f"bus.{bc.driver}"
         if self.wire_level and key in emulators():
             params = emulators().load(key)(self, bc)

@@ -93,3 +93,33 @@ def test_a_part_that_raises_faults_its_own_module_and_the_rest_keeps_stepping(
     assert c.ask("sim:bus.plug=(demo_io)").startswith("sim:bus.error=(bad_params,")
     h.advance(2.1)
     assert "robot:demo.state=(fault)" in c.ask("robot:robot.get=()")
+
+
+def no_part(ctx: Any, module: str, config: Any) -> BrokenPart:
+    raise RuntimeError("the plugin's emulator cannot be built")
+
+
+def test_an_emulator_that_fails_to_build_leaves_its_buses_dead_and_the_rest_runs(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    installed = registry.Registry("ramp.emulators")
+    entries = [installed.entry(name) for name in installed.names()]
+    entries.append(registry.Entry("module.demo", f"{__name__}:no_part", "test-plugin"))
+    monkeypatch.setitem(registry._REGISTRIES, "ramp.emulators",
+                        registry.Registry("ramp.emulators", entries))
+    with caplog.at_level(logging.ERROR, logger="ramp.sim"):
+        h = SimHarness(YAML)
+    try:
+        assert any("failed to load or build" in r.getMessage() and r.exc_info
+                   for r in caplog.records)
+        c = h.connect()
+        health = c.ask("robot:robot.get=()")
+        assert "robot:demo.state=(ok)" not in health
+        assert "robot:base.state=(ok)" in health and "robot:ble.state=(ok)" in health
+        assert c.ask("base:base.drive=(60,0)") == ""
+        x0 = h.world.x
+        for _ in range(5):
+            h.advance(0.1)
+            assert c.ask("") == ""
+        assert h.world.x > x0 + 0.05
+    finally:
+        h.close()
