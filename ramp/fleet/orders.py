@@ -175,13 +175,17 @@ class Orders:
     def running(self) -> bool:
         """The fleet's order is driving the robot (SEMIAUTOMATIC)."""
         st = self.autonomy.status
-        if not (self.active and self.run is not None and self.run.dispatched and st):
+        run = self.run
+        if not (self.active and run is not None and st):
             return False
-        work = self.run.current
+        if not run.dispatched:  # between one node's work and the next, nothing waited for
+            return run.index > 0 and not run.over and not self.waiting_reason
+        work = run.current
         if work is not None and work.kind == RMC:
             return not st.get("held") and not st.get("over")
         task = st.get("task") or {}
-        return task.get("state") == "running"
+        # "done" with the order still in hand: between one node's task and the next
+        return task.get("state") in ("running", "done")
 
     def factsheet_actions(self) -> list[dict[str, Any]]:
         return [

@@ -150,6 +150,7 @@ def test_an_order_is_driven_node_by_node_with_dig_and_dump(tmp_path: Path) -> No
     rig.auto.task(goto["id"], "goto", "done", "goto", "reached x 0.90 y 1.00")
     st = rig.step()
     assert st["lastNodeId"] == "n1" and st["lastNodeSequenceId"] == 0
+    assert rig.orders.running  # between two nodes' tasks: still the order's (SEMIAUTOMATIC)
     assert nodes(st) == ["n2", "n3", "n4"]
     assert edges(st) == ["n1-n2", "n2-n3", "n3-n4"]  # the way to n2 is still ahead
     st = rig.step()
