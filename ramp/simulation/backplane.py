@@ -236,21 +236,52 @@ class SimBackplane:
             # One look at every pty the wait does not watch, then read those with bytes.
             ready = self._readable_unwatched()
             for name, device in self.sabertooth.items():
-                if name in watched:
+                if name in watched or name in self.dead:
                     continue
-                if device.link.master_fd in ready:
-                    device.service(now)
-                else:
-                    device.emulator.tick(now)
+                try:
+                    if device.link.master_fd in ready:
+                        device.service(now)
+                    else:
+                        device.emulator.tick(now)
+                except Exception as exc:  # noqa: BLE001 - emulator code: its own bus's fault
+                    self._device_faulted(name, exc)
         for name, device in self.sabertooth.items():
-            if name in watched:
-                device.emulator.tick(now)  # its bytes are read when the pty is readable
+            if name in watched and name not in self.dead:
+                try:
+                    device.emulator.tick(now)  # its bytes are read when the pty is readable
+                except Exception as exc:  # noqa: BLE001 - emulator code: its own bus's fault
+                    self._device_faulted(name, exc)
         for service in self.services:
-            service(now)
+            try:
+                service(now)
+            except Exception:  # noqa: BLE001 - emulator code: that service stops, once
+                log.exception("sim: the emulator service %r raised; it is not called again",
+                              service)
+                self.services.remove(service)
+                break  # the list changed: the others run at the next tick
         self._physics_dt += dt
         if self.physics_hz is None or self._physics_dt * self.physics_hz >= 1.0 - 1e-6:
             self.signals.step(self._physics_dt)
             self._physics_dt = 0.0
+
+    def _device_faulted(self, bus: str, exc: Exception) -> None:
+        """An emulator behind a pty raised (reading its wire or in its timers): that device
+        goes dead the way unplugged hardware does, once, and the backend's driver faults the
+        bus; the rest of the world keeps running."""
+        log.error("sim: the emulator of bus %s raised; the bus is dead (unplugged for good)",
+                  bus, exc_info=exc)
+        self.dead.add(bus)
+        if bus not in self.unplugged:
+            self.unplug(bus)
+
+    def _serve(self, bus: str, device: Any) -> None:
+        """A pty with bytes (the loop's wait): the device reads them, guarded."""
+        if bus in self.dead:
+            return
+        try:
+            device.service(self._clock.now())
+        except Exception as exc:  # noqa: BLE001 - emulator code: its own bus's fault
+            self._device_faulted(bus, exc)
 
     def _readable_unwatched(self) -> set[int] | tuple[()]:
         """Which ptys the loop's wait does not watch have input now: one `poll(0)` on a poller
@@ -289,7 +320,7 @@ class SimBackplane:
             if old is not None:
                 sched.remove_reader(old)
             if fd >= 0:
-                sched.add_reader(fd, lambda d=device: d.service(self._clock.now()))
+                sched.add_reader(fd, lambda b=name, d=device: self._serve(b, d))
                 self._watched[name] = fd
             else:
                 self._watched.pop(name, None)

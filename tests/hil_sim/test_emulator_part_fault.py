@@ -123,3 +123,37 @@ def test_an_emulator_that_fails_to_build_leaves_its_buses_dead_and_the_rest_runs
         assert h.world.x > x0 + 0.05
     finally:
         h.close()
+
+
+@pytest.mark.parametrize("where", ["tick", "service"])
+def test_a_wire_emulator_that_raises_kills_only_its_own_bus(
+        where: str, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    """The Sabertooth emulator behind the BLE's pty raises in its timers or reading its wire:
+    that bus goes dead (one traceback), the BLE faults through its real driver, the base and
+    the physics carry on."""
+    h = SimHarness()
+    try:
+        c = h.connect()
+        device = h.backplane.sabertooth["ble_motors"]
+        target = device.emulator if where == "tick" else device
+
+        def broken(*args: Any) -> None:
+            raise ZeroDivisionError("a bug in the emulator")
+
+        with caplog.at_level(logging.ERROR, logger="ramp.sim"):
+            monkeypatch.setattr(target, where, broken)
+            assert c.ask("base:base.drive=(60,0)ble:chain.vel=(20)") == ""
+            x0 = h.world.x
+            for _ in range(15):
+                h.advance(0.1)
+                assert c.ask("") == ""
+        raised = [r for r in caplog.records if "emulator of bus ble_motors raised" in
+                  r.getMessage()]
+        assert len(raised) == 1 and raised[0].exc_info is not None
+        health = c.ask("robot:robot.get=()")
+        assert "robot:ble.state=(fault)" in health and "robot:base.state=(ok)" in health
+        # still driving (held to a creep: with the lift unread the interlocks fail closed)
+        assert h.world.x > x0 + 0.02
+        assert "ble_motors" in h.backplane.dead
+    finally:
+        h.close()
