@@ -8,14 +8,13 @@ network) and prints `ramp-teleop: open http://127.0.0.1:PORT/` once it is servin
 from __future__ import annotations
 
 import argparse
-import asyncio
 import logging
 import re
-import signal
 import sys
 from collections.abc import Sequence
 
 from ramp.common.endpoint import add_tls_arguments, certificate_name, context_for, split_scheme
+from ramp.common.web import serve_app
 from ramp.mcp.client import parse_address
 from ramp.teleop.profile import DEFAULT_PROFILE, ProfileError, ProfileLibrary
 
@@ -124,7 +123,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     try:
-        import uvicorn
+        import uvicorn  # noqa: F401 - the extra's check: said here, before anything starts
 
         from ramp.teleop.app import create_app
         from ramp.teleop.console import Console
@@ -147,24 +146,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                       ssl_context=ssl_context)
     # ws="websockets-sansio": name the WebSocket implementation, so a missing library is an
     # import error at start rather than uvicorn quietly answering every upgrade with 404.
-    config = uvicorn.Config(create_app(console), ws="websockets-sansio", lifespan="on",
-                            log_level="warning", timeout_graceful_shutdown=2)
-    server = uvicorn.Server(config)
-    # uvicorn shuts down gracefully on SIGINT/SIGTERM (the console stops what it moved), then
-    # raises the signal again to whatever handler was there before; this one makes that the
-    # end of it, so Ctrl-C and `kill` exit 0 without a traceback.
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda signum, frame: setattr(server, "should_exit", True))
-
-    async def serve() -> None:
-        task = asyncio.create_task(server.serve(sockets=[sock]))
-        while not server.started and not task.done():
-            await asyncio.sleep(0.01)
-        if server.started:
-            print(f"ramp-teleop: open http://{HTTP_HOST}:{http_port}/", flush=True)
-        await task
-
-    asyncio.run(serve())
+    serve_app(create_app(console), sock,
+              lambda: print(f"ramp-teleop: open http://{HTTP_HOST}:{http_port}/", flush=True),
+              ws="websockets-sansio", lifespan="on", graceful_s=2)
     return EXIT_OK
 
 

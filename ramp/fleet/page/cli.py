@@ -4,8 +4,6 @@ page (SPEC 14). It prints `ramp-fleet: page on http://127.0.0.1:P/` once serving
 from __future__ import annotations
 
 import argparse
-import asyncio
-import signal
 import socket
 import sys
 from collections.abc import Sequence
@@ -47,8 +45,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 2
         tls = {"cert": args.cert, "key": args.key, "ca": args.ca}
     try:
-        import uvicorn
+        import uvicorn  # noqa: F401 - the extras' check: said here, before anything starts
 
+        from ramp.common.web import serve_app
         from ramp.fleet.page.app import create_app
         from ramp.fleet.page.supervisor import FleetSupervisor
     except ImportError as exc:
@@ -63,23 +62,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     supervisor = FleetSupervisor(host, port, client_id=args.name, tls=tls, consoles=consoles)
     supervisor.start()
-    config = uvicorn.Config(create_app(supervisor), lifespan="off", log_level="warning",
-                            timeout_graceful_shutdown=1)
-    server = uvicorn.Server(config)
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda signum, frame: setattr(server, "should_exit", True))
-
-    async def serve() -> None:
-        task = asyncio.create_task(server.serve(sockets=[sock]))
-        while not server.started and not task.done():
-            await asyncio.sleep(0.02)
-        if server.started:
-            print(f"ramp-fleet: page on http://{HTTP_HOST}:{sock.getsockname()[1]}/ "
-                  f"(broker {host}:{port})", flush=True)
-        await task
-
     try:
-        asyncio.run(serve())
+        serve_app(create_app(supervisor), sock, lambda: print(
+            f"ramp-fleet: page on http://{HTTP_HOST}:{sock.getsockname()[1]}/ "
+            f"(broker {host}:{port})", flush=True))
     finally:
         supervisor.close()
     return 0
