@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
-import select
 import signal
 import socket
 import subprocess
@@ -23,6 +21,7 @@ import pytest
 
 from ramp.fleet import vda5050 as v
 from ramp.fleet.broker import LocalBroker
+from ramp.fleet.sim import Proc
 from tests.fleet.schemas import validate
 from tests.fleet_fixtures import Collector, start_agent
 from tests.harness import REPO, ask_line, stop_process, value
@@ -34,38 +33,15 @@ class SimMission:
     def __init__(self) -> None:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "ramp.cli", "sim", "mission", "--realtime", "--port", "0",
-             "--command-port", "0", "--duration", "300", "--seed", "1"], cwd=REPO, text=True,
+             "--command-port", "0", "--duration", "300", "--seed", "1"], cwd=REPO,
             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
             env={**os.environ, "PYTHONUNBUFFERED": "1"})
-        self.lines: list[str] = []
-        self._buf = ""
+        # its announcements read as `ramp fleet sim` reads its robots'
+        self.expect = Proc("ramp sim mission", self.proc).expect
         m = self.expect(r"MCP on ([\d.]+):(\d+)")
         self.mcp = (m.group(1), int(m.group(2)))
         m = self.expect(r"autonomy commands on ([\d.]+):(\d+)")
         self.commands = f"{m.group(1)}:{m.group(2)}"
-
-    def expect(self, pattern: str, timeout: float = 60) -> re.Match[str]:
-        """The first line (read or still to come) matching `pattern`; the pipe is read raw,
-        so two lines in one read are both seen."""
-        assert self.proc.stdout is not None
-        fd = self.proc.stdout.fileno()
-        deadline = time.monotonic() + timeout
-        while True:
-            while "\n" in self._buf:
-                line, self._buf = self._buf.split("\n", 1)
-                self.lines.append(line)
-                m = re.search(pattern, line)
-                if m:
-                    return m
-            if time.monotonic() >= deadline:
-                break
-            r, _, _ = select.select([fd], [], [], 0.2)
-            if r:
-                data = os.read(fd, 65536)
-                if not data:
-                    break
-                self._buf += data.decode(errors="replace")
-        raise AssertionError(f"no {pattern!r}:\n" + "\n".join(self.lines))
 
     def close(self) -> None:
         if self.proc.poll() is None:
