@@ -23,7 +23,7 @@ from __future__ import annotations
 from ramp.autonomy.executive.drive import PlanDriver
 from ramp.autonomy.executive.kit import Kit
 from ramp.autonomy.executive.look import RUNNING, LookAgain, wants_look
-from ramp.autonomy.executive.plan import StartPlanners, plan_home, plan_vantage
+from ramp.autonomy.executive.plan import plan_home, plan_vantage, start_planners
 from ramp.autonomy.executive.step import Step
 from ramp.autonomy.planning import PlanResult, Pose
 from ramp.statemachine import Status
@@ -43,11 +43,7 @@ def fix_spacing(kit: Kit, plan: PlanResult) -> float:
 
 
 class PrepareForScan(Step):
-    planners: StartPlanners | None = None  # shared by every instance: built once
-
     def begin(self, now: float) -> None:
-        if PrepareForScan.planners is None:
-            PrepareForScan.planners = StartPlanners()
         self.driver: PlanDriver | None = None
 
     def step(self, now: float, dt: float) -> Status:
@@ -67,8 +63,7 @@ class PrepareForScan(Step):
             self.driver.cancel()
 
     def _plan(self, pose: Pose, headings: bool = True) -> PlanResult:
-        assert PrepareForScan.planners is not None
-        return plan_vantage(self.kit, PrepareForScan.planners, pose, headings=headings)
+        return plan_vantage(self.kit, start_planners(), pose, headings=headings)
 
 
 class CrossToDig(Step):

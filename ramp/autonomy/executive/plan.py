@@ -20,6 +20,7 @@ needs.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 
@@ -70,6 +71,13 @@ class StartPlanners:
         if self._fine is None:
             self._fine = Planner(START_REGION, START_FINE)
         return self._fine
+
+
+@functools.cache
+def start_planners() -> StartPlanners:
+    """The start region's planners, one set for every step that plans there (built at the
+    first use; the region never changes)."""
+    return StartPlanners()
 
 
 def vantage_goals(kit: Kit, pose: Pose) -> list[tuple[float, float]]:

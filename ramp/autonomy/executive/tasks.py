@@ -48,7 +48,7 @@ from ramp.autonomy.executive.crossing import fix_spacing
 from ramp.autonomy.executive.dig import Excavate
 from ramp.autonomy.executive.drive import PlanDriver
 from ramp.autonomy.executive.kit import Kit, yaw_error
-from ramp.autonomy.executive.plan import StartPlanners
+from ramp.autonomy.executive.plan import start_planners
 from ramp.autonomy.executive.step import Step
 from ramp.autonomy.planning import Planner, PlanResult, Pose
 from ramp.statemachine import Mission, StandStill, Status
@@ -86,8 +86,6 @@ def in_start_region(x: float) -> bool:
 
 class GoTo(Step):
     """Plan to `target` (x, y, optional yaw) and drive there (see the module docstring)."""
-
-    planners: StartPlanners | None = None  # shared: built once
 
     def __init__(self, kit: Kit, target: tuple[float, float, float | None]) -> None:
         super().__init__(kit)
@@ -135,9 +133,7 @@ class GoTo(Step):
             return self.ctx.planner
         if not in_start_region(self.target[0]):
             return None
-        if GoTo.planners is None:
-            GoTo.planners = StartPlanners()
-        return GoTo.planners.coarse
+        return start_planners().coarse
 
     def _plan(self, pose: Pose, headings: bool = True) -> PlanResult:
         x, y, yaw = self.target
@@ -145,8 +141,8 @@ class GoTo(Step):
         if planner is None:
             return PlanResult((), "no obstacle map")
         result = planner.plan(pose, (x, y), goal_yaw=yaw, headings=headings)
-        if not result.ok and self.ctx.planner is None and GoTo.planners is not None:
-            result = GoTo.planners.fine.plan(pose, (x, y), goal_yaw=yaw, headings=headings)
+        if not result.ok and self.ctx.planner is None:  # planned on the start region's
+            result = start_planners().fine.plan(pose, (x, y), goal_yaw=yaw, headings=headings)
         return result
 
 
