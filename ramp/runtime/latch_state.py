@@ -131,7 +131,7 @@ class LatchState:
         self._seen = seen
         devices = {label: str(latch.reason) for label, latch in self._latches().items()
                    if latch.reason}
-        rules = sorted(r.name for r in interlocks.rules if r.latched) if interlocks else []
+        rules = sorted(interlocks.latched_names()) if interlocks is not None else []
         if self._saved == (devices, rules):
             return
         if self._write(devices, rules):

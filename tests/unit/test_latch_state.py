@@ -36,7 +36,7 @@ def test_an_unwritable_directory_costs_persistence_only(
     blocker.write_text("")
     latch = FaultLatch("lift")
     module = SimpleNamespace(latches={"lift": latch})
-    interlocks = SimpleNamespace(rules=[], latch_changes=0,
+    interlocks = SimpleNamespace(rules=[], latch_changes=0, latched_names=lambda: (),
                                  restore_latched=lambda names: list(names))
     state = LatchState(blocker / "latches.json")
     with caplog.at_level(logging.WARNING, logger="ramp.latches"):
