@@ -157,7 +157,7 @@ class SimBackplane:
             return default_bus_factory(bc)
         bus = self._bus(bc)
         if bc.name in self.dead:  # its module's emulator failed at start: as if unplugged
-            self.unplug(bc.name)
+            self._kill(bc.name)
         return bus
 
     def _bus(self, bc: BusConfig) -> Bus:
@@ -206,9 +206,7 @@ class SimBackplane:
         buses = sorted({dc.bus for m in modules for dc in self.config.modules[m].devices.values()
                         if dc.bus})
         for bus in buses:
-            if bus not in self.unplugged:
-                self.unplug(bus)
-        self.dead.update(buses)
+            self._kill(bus)
         log.error("sim: modules %s: their emulator part faulted; buses %s are dead",
                   ", ".join(sorted(modules)) or "(none)", ", ".join(buses) or "(none)")
 
@@ -270,6 +268,10 @@ class SimBackplane:
         bus; the rest of the world keeps running."""
         log.error("sim: the emulator of bus %s raised; the bus is dead (unplugged for good)",
                   bus, exc_info=exc)
+        self._kill(bus)
+
+    def _kill(self, bus: str) -> None:
+        """`bus` unplugged for good: `plug` leaves it dead."""
         self.dead.add(bus)
         if bus not in self.unplugged:
             self.unplug(bus)
