@@ -142,6 +142,8 @@ class SabertoothBus(Bus):
         self._ser: Any = None
         self._fd: int | None = None
         self._room_cap: int | None = None  # in-process handlers: their queue size
+        #: The port's descriptor, kept registered for the per-tick hang-up look.
+        self._alive: select.poll | None = None
         self._now = 0.0
         self._reset_state()
 
@@ -203,10 +205,12 @@ class SabertoothBus(Bus):
             _release(ser)
             raise DeviceError(self.name, f"cannot open {self.port}: {exc}") from exc
         self._ser = ser
-        self._fd = None
+        self._fd, self._alive = None, None
         self._room_cap = None
         try:
             self._fd = ser.fileno()
+            self._alive = select.poll()
+            self._alive.register(self._fd, select.POLLIN)
         except (AttributeError, OSError, ValueError):
             self._room_cap = getattr(ser, "buffer_size", None) if in_process else None
         start = bytearray()
@@ -282,7 +286,7 @@ class SabertoothBus(Bus):
         return codec.encode(packet[0], packet[1], 0)[len(packet) - len(tail):]
 
     def _close(self) -> None:
-        ser, self._ser, self._fd = self._ser, None, None
+        ser, self._ser, self._fd, self._alive = self._ser, None, None, None
         self._tail, self._tail_packet = b"", b""
         self._pending.clear()
         if ser is not None:
@@ -426,12 +430,13 @@ class SabertoothBus(Bus):
         """Notice an unplugged adapter within one tick even when nothing is due to be sent.
 
         A Sabertooth never talks back, so a readable port means a hang-up (or line noise,
-        which is read and dropped)."""
-        if self._fd is None or self._ser is None:
+        which is read and dropped). One `poll(0)` on a poller kept while the port is open:
+        the idle tick's one system call, without building a descriptor set each time."""
+        alive = self._alive
+        if alive is None or self._ser is None:
             return
         try:
-            readable, _, _ = select.select([self._fd], [], [], 0)
-            if readable:
+            if alive.poll(0):  # POLLIN, or POLLHUP/POLLERR/POLLNVAL: the read says which
                 self._ser.read(256)
         except (serial.SerialException, OSError, ValueError) as exc:
             self.failure = DeviceError(self.name, f"{self.port} vanished: {exc}")
