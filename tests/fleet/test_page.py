@@ -117,11 +117,12 @@ def fleet() -> Iterator[dict[str, Any]]:
 
     need_mosquitto()
     proc = subprocess.Popen([sys.executable, "-m", "ramp.cli", "fleet", "sim", "--robots",
-                             "marte,marte-noauto,scout", "--http-port", "0"], cwd=REPO,
+                             "marte,marte-noauto,scout", "--http-port", "0", "--consoles"],
+                            cwd=REPO,
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
                             env={**os.environ, "PYTHONUNBUFFERED": "1"})
     assert proc.stdout is not None
-    out: dict[str, Any] = {"robots": {}}
+    out: dict[str, Any] = {"robots": {}, "consoles": {}}
     deadline = time.monotonic() + 150
     while "page" not in out and time.monotonic() < deadline:
         r, _, _ = select.select([proc.stdout], [], [], 0.5)
@@ -130,6 +131,9 @@ def fleet() -> Iterator[dict[str, Any]]:
             m = re.search(r"robot (\S+) \((\S+)\) MCP on ([\d.]+):(\d+)", line)
             if m:
                 out["robots"][m.group(1)] = (m.group(3), int(m.group(4)))
+            m = re.search(r"console for (\S+) on (http://\S+)", line)
+            if m:
+                out["consoles"][m.group(1)] = m.group(2)
             m = re.search(r"page on (http://\S+)", line)
             if m:
                 out["page"] = m.group(1)
@@ -158,9 +162,13 @@ def test_stop_all_in_the_browser_stops_every_robot(fleet: dict[str, Any]) -> Non
         browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
                                     args=["--no-sandbox", "--disable-gpu"])
         try:
-            page = browser.new_page(viewport={"width": 1300, "height": 640})
+            page = browser.new_page(viewport={"width": 1300, "height": 420})
             page.goto(fleet["page"])
             tiles = {s: page.get_by_test_id(f"robot-{s}") for s in wires}
+            assert sorted(fleet["consoles"]) == sorted(wires)
+            for serial, url in fleet["consoles"].items():  # each tile links its own console
+                sync_api.expect(tiles[serial].get_by_test_id("console")).to_have_attribute(
+                    "href", url, timeout=40_000)
             for serial in ("marte-noauto-1", "scout-1"):  # their factsheets list no rmcMission
                 sync_api.expect(tiles[serial].get_by_test_id("send-mission")).to_be_disabled(
                     timeout=40_000)
@@ -184,7 +192,7 @@ def test_stop_all_in_the_browser_stops_every_robot(fleet: dict[str, Any]) -> Non
                 "paused")
             # Every stop confirmed: no alert says one is late.
             assert page.locator('[data-alert$=":stop-late"]').count() == 0
-            page.screenshot(path=str(shot))
+            page.screenshot(path=str(shot), full_page=True)
             for serial, s in wires.items():  # on the emulated wire, and it stays so
                 for _ in range(2):
                     got = ask_line(s, "base:base.get=()")
