@@ -69,8 +69,18 @@
     });
   }
 
-  $("stop-all").onclick = () => post("/api/stop_all").then(refresh);
-  document.addEventListener("keydown", (e) => { if (e.code === "Space" && e.target === document.body) { e.preventDefault(); post("/api/stop_all"); } });
+  const stopAll = () => post("/api/stop_all").then(refresh);
+  $("stop-all").onclick = stopAll;
+  // Space is Stop all wherever the focus is, as the console's Space is its STOP: never a
+  // press of the focused button (a Space on a focused Resume must not resume).
+  const isSpace = (e) => e.code === "Space" || e.key === " " || e.key === "Spacebar";
+  window.addEventListener("keydown", (e) => {
+    if (!isSpace(e)) return;
+    e.preventDefault();
+    e.stopPropagation();
+    if (!e.repeat) stopAll();
+  }, true);
+  window.addEventListener("keyup", (e) => { if (isSpace(e)) { e.preventDefault(); e.stopPropagation(); } }, true);
   refresh();
   setInterval(refresh, 250);
 })();
