@@ -66,7 +66,7 @@ mission: $(STAMP) $(ACCEL)
 # Ctrl-C stops the robots first, then the rest.
 FLEET_PORT ?= 8090
 fleet: $(STAMP)
-	$(VENV)/bin/ramp fleet sim --http-port $(FLEET_PORT)
+	$(VENV)/bin/ramp fleet sim --http-port $(FLEET_PORT) --consoles
 
 # The issue's campaign: 40 seeded missions over both start boxes and all four headings.
 campaign: $(STAMP) $(ACCEL)

@@ -5,6 +5,7 @@ set-up), then per robot its backend and its agent, each a process of its own (a 
 is a crash the others survive, and the broker reports it by its last will), then the page.
 Robot kinds: `marte` (the simulated RMC mission on the wall clock, with the autonomy, which
 waits for the fleet's `rmcMission`), `marte-noauto` (MARTE's backend alone), `scout`.
+`--consoles` adds an operator console (`ramp-teleop`) per robot, linked from its tile.
 Ctrl-C (or SIGTERM) stops the robots first, so every motor is stopped, then the rest.
 """
 
@@ -91,6 +92,8 @@ def add_sim(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    help=f"comma-separated kinds ({', '.join(KINDS)}); default all three")
     p.add_argument("--broker-port", type=int, default=0, help="the broker's port (0: free)")
     p.add_argument("--http-port", type=int, default=8090, help="the page's port (default 8090)")
+    p.add_argument("--consoles", action="store_true",
+                   help="also an operator console (ramp-teleop) per robot, linked from its tile")
     p.set_defaults(func=cmd_sim)
 
 
@@ -110,7 +113,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     try:
         broker.start()
         print(f"ramp fleet: broker on {broker.address}", flush=True)
-        consoles = []
+        consoles: list[str] = []  # the page's --console SERIAL=URL arguments
         seen: dict[str, int] = {}
         for kind in kinds:
             seen[kind] = seen.get(kind, 0) + 1
@@ -132,9 +135,17 @@ def cmd_sim(args: argparse.Namespace) -> int:
             others.append(agent)
             agent.expect(r"ramp-fleet-agent: ")
             print(f"ramp fleet: robot {serial} ({kind}) MCP on {mcp}", flush=True)
-            consoles.append(serial)
+            if args.consoles:
+                console = _spawn(f"console {serial}", ["-m", "ramp.teleop.cli", "--backend", mcp,
+                                                       "--http-port", "0"],
+                                 work / f"console-{serial}.log")
+                others.append(console)
+                url = console.expect(r"open (http://\S+)").group(1)
+                print(f"ramp fleet: console for {serial} on {url}", flush=True)
+                consoles += ["--console", f"{serial}={url}"]
         page = _spawn("page", ["-m", "ramp.fleet.page.cli", "--broker", broker.address,
-                               "--http-port", str(args.http_port)], work / "page.log")
+                               "--http-port", str(args.http_port), *consoles],
+                      work / "page.log")
         others.append(page)
         m = page.expect(r"page on (http://\S+)")
         print(f"ramp fleet: page on {m.group(1)} (logs in {work}); Ctrl-C stops all",

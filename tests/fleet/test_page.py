@@ -1,9 +1,11 @@
 """The fleet page (SPEC 14): tiles from what robots publish, and Stop all measured per robot.
 
 A unit part feeds the supervisor VDA 5050 messages by hand; a browser part runs `ramp fleet
-sim` (a real Mosquitto, two simulated robots and their agents, the page) in Debian's chromium
-and presses STOP ALL while both robots drive: the wheels stop (read over MCP) and each tile
-shows its measured time to `driving=false`."""
+sim` (a real Mosquitto, the three simulated robots -- MARTE with the autonomy, MARTE without,
+Scout -- their agents, the page) in Debian's chromium: it sends MARTE-with-autonomy its mission
+from the page, drives the other two over MCP, and presses STOP ALL while all three drive: every
+wheel stops (read over MCP, on the emulated wire), stays stopped, and each tile shows its
+measured time to `driving=false`."""
 
 from __future__ import annotations
 
@@ -115,12 +117,13 @@ def fleet() -> Iterator[dict[str, Any]]:
 
     need_mosquitto()
     proc = subprocess.Popen([sys.executable, "-m", "ramp.cli", "fleet", "sim", "--robots",
-                             "marte-noauto,scout", "--http-port", "0"], cwd=REPO,
+                             "marte,marte-noauto,scout", "--http-port", "0", "--consoles"],
+                            cwd=REPO,
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
                             env={**os.environ, "PYTHONUNBUFFERED": "1"})
     assert proc.stdout is not None
-    out: dict[str, Any] = {"robots": {}}
-    deadline = time.monotonic() + 90
+    out: dict[str, Any] = {"robots": {}, "consoles": {}}
+    deadline = time.monotonic() + 150
     while "page" not in out and time.monotonic() < deadline:
         r, _, _ = select.select([proc.stdout], [], [], 0.5)
         if r:
@@ -128,6 +131,9 @@ def fleet() -> Iterator[dict[str, Any]]:
             m = re.search(r"robot (\S+) \((\S+)\) MCP on ([\d.]+):(\d+)", line)
             if m:
                 out["robots"][m.group(1)] = (m.group(3), int(m.group(4)))
+            m = re.search(r"console for (\S+) on (http://\S+)", line)
+            if m:
+                out["consoles"][m.group(1)] = m.group(2)
             m = re.search(r"page on (http://\S+)", line)
             if m:
                 out["page"] = m.group(1)
@@ -143,38 +149,58 @@ def fleet() -> Iterator[dict[str, Any]]:
             proc.communicate()
 
 
+@pytest.mark.timeout(300)
 def test_stop_all_in_the_browser_stops_every_robot(fleet: dict[str, Any]) -> None:
     import socket
 
     sync_api = pytest.importorskip("playwright.sync_api")
-    drivers = {}
-    for serial, (host, port) in fleet["robots"].items():
-        s = socket.create_connection((host, port))
-        assert ask_line(s, "robot:watchdog.timeout=(30)base:base.drive=(40,0)") == ""
-        drivers[serial] = s
+    assert sorted(fleet["robots"]) == ["marte-1", "marte-noauto-1", "scout-1"]
+    wires = {serial: socket.create_connection(addr) for serial, addr in fleet["robots"].items()}
     shot = (REPO / "docs" / "img" / "fleet.png" if os.environ.get("RAMP_UPDATE_DOCS") == "1"
             else Path(tempfile.gettempdir()) / f"ramp-fleet-{os.getpid()}.png")
     with sync_api.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
                                     args=["--no-sandbox", "--disable-gpu"])
         try:
-            page = browser.new_page(viewport={"width": 1300, "height": 760})
+            page = browser.new_page(viewport={"width": 1300, "height": 420})
             page.goto(fleet["page"])
-            for serial in drivers:
-                tile = page.get_by_test_id(f"robot-{serial}")
+            tiles = {s: page.get_by_test_id(f"robot-{s}") for s in wires}
+            assert sorted(fleet["consoles"]) == sorted(wires)
+            for serial, url in fleet["consoles"].items():  # each tile links its own console
+                sync_api.expect(tiles[serial].get_by_test_id("console")).to_have_attribute(
+                    "href", url, timeout=40_000)
+            for serial in ("marte-noauto-1", "scout-1"):  # their factsheets list no rmcMission
+                sync_api.expect(tiles[serial].get_by_test_id("send-mission")).to_be_disabled(
+                    timeout=40_000)
+            mission = tiles["marte-1"].get_by_test_id("send-mission")
+            sync_api.expect(mission).to_be_enabled(timeout=40_000)
+            mission.click()  # an order with rmcMission: its autonomy drives it
+            sync_api.expect(tiles["marte-1"].get_by_test_id("motion")).to_have_text(
+                "driving", timeout=60_000)
+            for serial in ("marte-noauto-1", "scout-1"):  # no autonomy: driven over MCP
+                assert ask_line(wires[serial],
+                                "robot:watchdog.timeout=(30)base:base.drive=(40,0)") == ""
+            for tile in tiles.values():
                 sync_api.expect(tile.get_by_test_id("motion")).to_have_text("driving",
-                                                                             timeout=40_000)
+                                                                             timeout=60_000)
             page.get_by_test_id("stop-all").click()
-            for serial in drivers:
-                tile = page.get_by_test_id(f"robot-{serial}")
+            for tile in tiles.values():
                 sync_api.expect(tile.get_by_test_id("stop-time")).to_contain_text(
                     "ms to driving=false", timeout=15_000)
                 sync_api.expect(tile.get_by_test_id("motion")).to_have_text("paused")
-            page.screenshot(path=str(shot))
+            sync_api.expect(tiles["marte-1"].get_by_test_id("mission")).to_contain_text(
+                "paused")
+            # Every stop confirmed: no alert says one is late.
+            assert page.locator('[data-alert$=":stop-late"]').count() == 0
+            page.screenshot(path=str(shot), full_page=True)
+            for serial, s in wires.items():  # on the emulated wire, and it stays so
+                for _ in range(2):
+                    got = ask_line(s, "base:base.get=()")
+                    speeds = [int(x) for x in re.findall(r"_wheel\.vel=\((-?\d+)\)", got)]
+                    assert speeds and all(x == 0 for x in speeds), (serial, got)
+                    time.sleep(1.0)  # the paused autonomy must not drive again
+            sync_api.expect(tiles["marte-1"].get_by_test_id("motion")).to_have_text("paused")
         finally:
             browser.close()
-    for serial, s in drivers.items():
-        got = ask_line(s, "base:base.get=()")
-        speeds = [int(x) for x in re.findall(r"_wheel\.vel=\((-?\d+)\)", got)]
-        assert speeds and all(x == 0 for x in speeds), (serial, got)
-        s.close()
+            for s in wires.values():
+                s.close()

@@ -22,12 +22,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ramp.fleet import vda5050 as v
+from ramp.fleet.page.alerts import LEVELS, Alert, Board, robot_alerts
 
 log = logging.getLogger("ramp.fleet.page")
 
 TOPICS = ("connection", "state", "factsheet", "visualization")
-#: Severities, the console's model (ramp.teleop.alerts): an error is acted on now.
-LEVELS = {"FATAL": "error", "WARNING": "warning"}
 
 
 @dataclass
@@ -50,6 +49,14 @@ class Tile:
         """The actions its factsheet says it takes (instant and in orders)."""
         feats = self.factsheet.get("protocolFeatures", {})
         return sorted({str(a.get("actionType")) for a in feats.get("agvActions", [])})
+
+    def alerts(self, now: float) -> list[Alert]:
+        """Its alerts in the console's model (ramp.fleet.page.alerts)."""
+        pending = (now - self.stop_sent_at if self.stop_sent_at is not None
+                   and self.stop_ms is None else None)
+        return robot_alerts(self.serial, self.connection,
+                            now - self.last_seen if self.last_seen else None, self.state,
+                            pending)
 
     def as_json(self, now: float, consoles: dict[str, str]) -> dict[str, Any]:
         spec = self.factsheet.get("typeSpecification", {})
@@ -101,6 +108,7 @@ class FleetSupervisor:
         self.clock = clock
         self.consoles = dict(consoles or {})
         self.tiles: dict[tuple[str, str], Tile] = {}
+        self.board = Board()
         self.lock = threading.Lock()
         self.connected = threading.Event()
         self._ids = itertools.count(1)
@@ -224,7 +232,17 @@ class FleetSupervisor:
 
     def snapshot(self) -> dict[str, Any]:
         now = self.clock()
+        connected = self.connected.is_set()
         with self.lock:
-            tiles = [t.as_json(now, self.consoles) for _, t in sorted(self.tiles.items())]
-        return {"broker": f"{self.host}:{self.port}", "connected": self.connected.is_set(),
-                "robots": tiles}
+            ordered = [t for _, t in sorted(self.tiles.items())]
+            tiles = [t.as_json(now, self.consoles) for t in ordered]
+            raised = [a for t in ordered for a in t.alerts(now)]
+            if not connected:
+                raised.append(Alert("broker", "error", "No broker",
+                                    f"The page has no connection to the broker at {self.host}:"
+                                    f"{self.port}: what it shows is stale and Stop all cannot "
+                                    "reach the robots. Check the broker; the page reconnects by "
+                                    "itself."))
+            alerts = self.board.update(raised, now)
+        return {"broker": f"{self.host}:{self.port}", "connected": connected,
+                "robots": tiles, "alerts": alerts}

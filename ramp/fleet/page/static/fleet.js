@@ -38,7 +38,7 @@
     const key = `${encodeURIComponent(r.manufacturer)}/${encodeURIComponent(r.serial)}`;
     const pause = el("button", { text: r.paused ? "Resume" : "Pause", "data-testid": "pause" });
     pause.onclick = () => post(`/api/robot/${key}/${r.paused ? "resume" : "pause"}`).then(refresh);
-    const mission = el("button", { text: "Send mission", "data-testid": "mission", title: r.can_mission ? "an order with rmcMission: the robot's autonomy runs the whole mission" : "this robot lists no rmcMission (no autonomy)" });
+    const mission = el("button", { text: "Send mission", "data-testid": "send-mission", title: r.can_mission ? "an order with rmcMission: the robot's autonomy runs the whole mission" : "this robot lists no rmcMission (no autonomy)" });
     mission.disabled = !r.can_mission;
     mission.onclick = () => post(`/api/robot/${key}/mission`).then(refresh);
     b.append(pause, mission);
@@ -50,22 +50,37 @@
   function render(f) {
     last = f;
     $("broker").textContent = `broker ${f.broker} · ${f.connected ? "connected" : "NOT CONNECTED"} · ${f.robots.length} robot(s)`;
-    const alerts = [];
-    if (!f.connected) alerts.push({ level: "error", text: `The page has no broker at ${f.broker}: what it shows is stale, and Stop all cannot reach the robots. Check the broker.` });
-    for (const r of f.robots) for (const a of r.alerts) alerts.push({ level: a.level, text: `${r.serial}: ${a.text}` });
-    $("alerts").replaceChildren(...alerts.map((a) => el("div", { class: `alert ${a.level}`, text: a.text })));
+    // The console's alert model: by severity then recency (the server orders them), kept while
+    // their cause holds, each with what happened and what to do.
+    const alerts = f.alerts || [];
+    $("alerts").replaceChildren(...alerts.map((a) => el("div", {
+      class: `alert ${a.severity}`, "data-testid": "alert", "data-severity": a.severity, "data-alert": a.id,
+      "data-serial": a.serial || undefined, role: a.severity === "error" ? "alert" : "status",
+    }, el("span", { class: "alert-title", text: a.title }), el("span", { class: "alert-text", text: a.text }),
+      el("span", { class: "alert-age", text: `for ${a.for_s.toFixed(0)} s` }))));
     const tiles = f.robots.map(tile);
     $("tiles").replaceChildren(...(tiles.length ? tiles : [el("div", { class: "empty", text: "No robot has spoken on the broker yet." })]));
   }
 
   function refresh() {
     return fetch("/api/fleet", { cache: "no-store" }).then((r) => r.json()).then(render).catch(() => {
-      if (last) render({ ...last, connected: false });
+      if (last) render({ ...last, connected: false, alerts: [{ id: "page", severity: "error", title: "Page server gone",
+        text: "ramp-fleet does not answer: what this page shows is stale and its buttons do nothing. Restart ramp-fleet.", for_s: 0 }] });
     });
   }
 
-  $("stop-all").onclick = () => post("/api/stop_all").then(refresh);
-  document.addEventListener("keydown", (e) => { if (e.code === "Space" && e.target === document.body) { e.preventDefault(); post("/api/stop_all"); } });
+  const stopAll = () => post("/api/stop_all").then(refresh);
+  $("stop-all").onclick = stopAll;
+  // Space is Stop all wherever the focus is, as the console's Space is its STOP: never a
+  // press of the focused button (a Space on a focused Resume must not resume).
+  const isSpace = (e) => e.code === "Space" || e.key === " " || e.key === "Spacebar";
+  window.addEventListener("keydown", (e) => {
+    if (!isSpace(e)) return;
+    e.preventDefault();
+    e.stopPropagation();
+    if (!e.repeat) stopAll();
+  }, true);
+  window.addEventListener("keyup", (e) => { if (isSpace(e)) { e.preventDefault(); e.stopPropagation(); } }, true);
   refresh();
   setInterval(refresh, 250);
 })();
