@@ -18,30 +18,18 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from ramp.common.alerts import BATTERY_LOW_PCT, Alert, AlertBook
 from ramp.mcp.describe import Catalog, InterlockInfo
 
-SEVERITIES = ("error", "warning", "info")
 #: Localization confidence under which the operator is warned.
 CONFIDENCE_LOW = 0.5
-#: Battery charge (%) under which it is low.
-BATTERY_LOW_PCT = 20.0
 
 
-@dataclass(frozen=True)
-class Alert:
-    """One alert as the page shows it."""
-
-    id: str
-    severity: str
-    title: str
-    text: str
-    #: `MODULE:DEVICE` whose latched fault a Reset button acknowledges.
-    reset: str = ""
-
-    def view(self, since: float) -> dict[str, Any]:
-        return {"id": self.id, "severity": self.severity, "title": self.title,
-                "text": self.text, "reset": self.reset,
-                "takeover": self.severity == "error", "since": since}
+def alert_view(alert: Alert, since: float) -> dict[str, Any]:
+    """One alert as the console's page takes it: an error offers Take control."""
+    return {"id": alert.id, "severity": alert.severity, "title": alert.title,
+            "text": alert.text, "reset": alert.reset,
+            "takeover": alert.severity == "error", "since": since}
 
 
 @dataclass
@@ -205,21 +193,8 @@ def _autonomy(a: dict[str, Any], owner: str, operator: str) -> list[Alert]:
     return out
 
 
-class AlertBook:
-    """The alerts shown now, each with when it was first raised."""
-
-    def __init__(self) -> None:
-        self._since: dict[str, float] = {}
-        self.alerts: list[Alert] = []
-
-    def update(self, alerts: list[Alert], now: float) -> bool:
-        """Take the alerts raised now; returns whether the list changed."""
-        since = {a.id: self._since.get(a.id, now) for a in alerts}
-        rank = {s: n for n, s in enumerate(SEVERITIES)}
-        ordered = sorted(alerts, key=lambda a: (rank.get(a.severity, 9), -since[a.id], a.id))
-        changed = ordered != self.alerts
-        self._since, self.alerts = since, ordered
-        return changed
+class ConsoleAlerts(AlertBook):
+    """The console's alerts now, each with when it was first raised."""
 
     def view(self) -> list[dict[str, Any]]:
-        return [a.view(self._since[a.id]) for a in self.alerts]
+        return [alert_view(a, self.since[a.id]) for a in self.alerts]

@@ -22,7 +22,7 @@ from ramp.mcp.describe import READ_FUNCTIONS, Catalog, error_text
 from ramp.mcp.messages import Request, Response
 from ramp.mcp.protocol import format_requests, parse_message
 from ramp.mcp.session import Reply
-from ramp.teleop.alerts import AlertBook, Inputs, active_interlocks, latch_flags, raised
+from ramp.teleop.alerts import ConsoleAlerts, Inputs, active_interlocks, latch_flags, raised
 from ramp.teleop.autonomy import AutonomyLink
 from ramp.teleop.controller import Controller, Message, module_stop
 from ramp.teleop.gate import PROBE, MotionGate
@@ -136,7 +136,7 @@ class Console:
         #: The autonomy's live view (SPEC 7.1), when `--autonomy` names one.
         self.autonomy = AutonomyLink(*autonomy, on_update=self._on_autonomy) \
             if autonomy is not None else None
-        self.alerts = AlertBook()
+        self.alerts = ConsoleAlerts()
         self._bandwidth: dict[str, Any] = {}
         self._counted: tuple[float, int, int] | None = None  # (time, mcp bytes, view bytes)
         self._started_at = 0.0

@@ -51,19 +51,25 @@ def ids(sup: FleetSupervisor) -> list[str]:
     return [a["id"] for a in sup.snapshot()["alerts"]]
 
 
+def shown(board: Board, alerts: list[Alert], now: float) -> list[dict[str, Any]]:
+    """The page's list after `alerts` were raised at `now`."""
+    board.update(alerts, now)
+    return board.view(now)
+
+
 def test_alerts_are_ordered_by_severity_then_recency_and_keep_their_first_time() -> None:
     board = Board()
     warn = Alert("a", "warning", "A", "a")
     err = Alert("b", "error", "B", "b")
     info = Alert("c", "info", "C", "c")
-    assert [a["id"] for a in board.update([info, warn], 10.0)] == ["a", "c"]
+    assert [a["id"] for a in shown(board, [info, warn], 10.0)] == ["a", "c"]
     later = Alert("d", "warning", "D", "d")
-    out = board.update([info, warn, err, later], 15.0)
+    out = shown(board, [info, warn, err, later], 15.0)
     assert [a["id"] for a in out] == ["b", "d", "a", "c"]  # the newer warning first
     assert [a["for_s"] for a in out] == [0.0, 0.0, 5.0, 5.0]
-    out = board.update([warn], 20.0)  # the others cleared: forgotten
+    out = shown(board, [warn], 20.0)  # the others cleared: forgotten
     assert [(a["id"], a["for_s"]) for a in out] == [("a", 10.0)]
-    assert board.update([warn, err], 21.0)[0] == {
+    assert shown(board, [warn, err], 21.0)[0] == {
         "id": "b", "severity": "error", "title": "B", "text": "b", "serial": "", "for_s": 0.0}
 
 

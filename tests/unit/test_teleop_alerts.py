@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ramp.mcp.describe import InterlockInfo, build_catalog
 from ramp.mcp.protocol import parse_response_line
-from ramp.teleop.alerts import AlertBook, Inputs, latch_flags, raised
+from ramp.teleop.alerts import ConsoleAlerts, Inputs, alert_view, latch_flags, raised
 
 
 def ids(i: Inputs) -> dict[str, str]:
@@ -39,7 +39,8 @@ def test_robot_side_alerts_say_what_happened_and_what_to_do() -> None:
     assert latched.reset == "ble:lift" and "ble:lift.reset=()" in latched.text
     assert "ladder_down_slow" in alerts["interlock:ladder_down_slow"].title
     assert "10 %" in alerts["battery:base:battery.volt"].text
-    assert latched.view(1.0)["takeover"] and not alerts["watchdog"].view(1.0)["takeover"]
+    assert alert_view(latched, 1.0)["takeover"]
+    assert not alert_view(alerts["watchdog"], 1.0)["takeover"]
 
 
 def test_a_lost_robot_link_is_an_error() -> None:
@@ -81,7 +82,7 @@ def test_an_unreachable_or_stale_view_is_a_warning_and_no_autonomy_means_no_view
 
 
 def test_the_book_orders_by_severity_then_recency_and_keeps_first_raised_times() -> None:
-    book = AlertBook()
+    book = ConsoleAlerts()
     i = Inputs(values={"robot:watchdog.state": "tripped"})
     assert book.update(raised(i), 1.0)
     i.states = {"ble": "fault"}
@@ -113,7 +114,7 @@ def test_an_info_interlock_is_no_alert_and_warning_or_error_ones_say_what_to_do(
     assert {k: a.severity for k, a in alerts.items()} == {
         "interlock:bumper": "error", "interlock:arm_out": "warning"}
     assert alerts["interlock:bumper"].text.startswith("Back away from what the bumper hit.")
-    assert alerts["interlock:bumper"].view(0.0)["takeover"]
+    assert alert_view(alerts["interlock:bumper"], 0.0)["takeover"]
     # No rule speaks of the lift unless it says so itself.
     assert "lift" not in alerts["interlock:arm_out"].text
     assert "robot:interlock.reset=(arm_out)" in alerts["interlock:arm_out"].text

@@ -5,38 +5,24 @@ says what happened and what the supervisor can do. Sans-IO.
 Everything comes from what the robots publish (their `connection` and `state`) and from what
 the page itself did (a Stop all not yet confirmed), never from a robot type: an error the robot
 reports keeps its own type, description and hint, FATAL being an error and WARNING a warning.
-The fleet may not import the console (its import contract), so the few numbers the two share
-are repeated here.
+The model itself (the alert, the book of first-raised times, the order, the battery's low
+mark) is the console's, from `ramp.common.alerts`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-from dataclasses import dataclass
 from typing import Any
 
-SEVERITIES = ("error", "warning", "info")
+from ramp.common.alerts import BATTERY_LOW_PCT, Alert, AlertBook
+
 #: VDA 5050 error levels in the console's severities.
 LEVELS = {"FATAL": "error", "WARNING": "warning"}
-#: Charge (%) under which a robot's battery is low (the console's threshold).
-BATTERY_LOW_PCT = 20.0
 #: An ONLINE robot silent this long is stale: `state` comes at least every 30 s (SPEC 14) and
 #: `visualization` at 2 Hz, so this is a dead agent whose will the broker has not yet sent.
 SILENT_S = 35.0
 #: A robot that has not confirmed a stopPause this long after it was sent is an error: the
 #: supervisor must stop it some other way.
 STOP_LATE_S = 2.0
-
-
-@dataclass(frozen=True)
-class Alert:
-    """One alert: `id` is stable while its cause lasts (it keeps its first-raised time)."""
-
-    id: str
-    severity: str
-    title: str
-    text: str
-    serial: str = ""
 
 
 def robot_alerts(serial: str, connection: str, silent_s: float | None,
@@ -48,21 +34,21 @@ def robot_alerts(serial: str, connection: str, silent_s: float | None,
         out.append(Alert(f"{serial}:stop-late", "error", f"{serial} has not confirmed the stop",
                          f"No state with the stopPause and driving=false {stop_pending_s:.0f} s "
                          "after it was sent. Stop it another way: its own console's STOP or "
-                         "its emergency stop.", serial))
+                         "its emergency stop.", serial=serial))
     if connection == "CONNECTIONBROKEN":
         out.append(Alert(f"{serial}:connection", "error", f"{serial}: connection broken",
                          "Its agent vanished (the broker sent its last will). The robot's "
                          "watchdog stops what the agent commanded, but the fleet can neither "
                          "see nor stop it: use its own console, and restart its agent.",
-                         serial))
+                         serial=serial))
     elif connection == "OFFLINE":
         out.append(Alert(f"{serial}:connection", "warning", f"{serial}: offline",
                          "Its agent left in an orderly way: the fleet cannot command it until "
-                         "the agent runs again.", serial))
+                         "the agent runs again.", serial=serial))
     elif silent_s is not None and silent_s >= SILENT_S:
         out.append(Alert(f"{serial}:silent", "warning", f"{serial}: silent",
                          f"No message for {silent_s:.0f} s though it said ONLINE: its agent or "
-                         "its link may be down. Check the robot at its console.", serial))
+                         "its link may be down. Check the robot at its console.", serial=serial))
     for e in state.get("errors", []):
         if not isinstance(e, dict):
             continue
@@ -75,29 +61,22 @@ def robot_alerts(serial: str, connection: str, silent_s: float | None,
                                                                       "warning"),
                          f"{serial}: {kind}",
                          f"{text.rstrip('.')}. {hint.rstrip('.') + '. ' if hint else ''}"
-                         "Act on it at the robot's own console.", serial))
+                         "Act on it at the robot's own console.", serial=serial))
     charge = state.get("batteryState", {}).get("batteryCharge")
     unknown = any(isinstance(i, dict) and i.get("infoType") == "batteryChargeUnknown"
                   for i in state.get("information", []))
     if isinstance(charge, int | float) and not unknown and charge < BATTERY_LOW_PCT:
         out.append(Alert(f"{serial}:battery", "warning", f"{serial}: battery low",
                          f"{charge:.0f} %: finish its task or bring it back to change it.",
-                         serial))
+                         serial=serial))
     return out
 
 
-class Board:
-    """The alerts shown now, each with the time its cause was first seen."""
+class Board(AlertBook):
+    """The page's alerts now, each with the time its cause was first seen."""
 
-    def __init__(self) -> None:
-        self.since: dict[str, float] = {}
-
-    def update(self, alerts: Iterable[Alert], now: float) -> list[dict[str, Any]]:
-        """The page's list: by severity, then the newest first; gone causes are forgotten."""
-        current = {a.id: a for a in alerts}
-        self.since = {k: self.since.get(k, now) for k in current}
-        ordered = sorted(current.values(),
-                         key=lambda a: (SEVERITIES.index(a.severity), -self.since[a.id], a.id))
+    def view(self, now: float) -> list[dict[str, Any]]:
+        """The page's list, with how long each has been raised."""
         return [{"id": a.id, "severity": a.severity, "title": a.title, "text": a.text,
                  "serial": a.serial, "for_s": round(now - self.since[a.id], 1)}
-                for a in ordered]
+                for a in self.alerts]

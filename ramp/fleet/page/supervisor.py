@@ -243,6 +243,7 @@ class FleetSupervisor:
                                     f"{self.port}: what it shows is stale and Stop all cannot "
                                     "reach the robots. Check the broker; the page reconnects by "
                                     "itself."))
-            alerts = self.board.update(raised, now)
+            self.board.update(raised, now)
+            alerts = self.board.view(now)
         return {"broker": f"{self.host}:{self.port}", "connected": connected,
                 "robots": tiles, "alerts": alerts}
