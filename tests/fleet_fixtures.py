@@ -4,16 +4,21 @@ does) or a test module."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import threading
 import time
 from collections.abc import Callable, Iterator
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
 from ramp.fleet.broker import LocalBroker, find_mosquitto
+
+if TYPE_CHECKING:
+    from ramp.fleet.init import FleetFiles
 
 
 def need_mosquitto() -> None:
@@ -30,6 +35,30 @@ def mosquitto() -> Iterator[LocalBroker]:
     need_mosquitto()
     with LocalBroker() as broker:
         yield broker
+
+
+@contextlib.contextmanager
+def tls_fleet(directory: Path, robots: list[str],
+              supervisors: list[str]) -> Iterator[tuple[FleetFiles, LocalBroker]]:
+    """`ramp fleet init`'s files for these robots and supervisors in `directory`, and a
+    Mosquitto serving them over mutual TLS with its ACL, stopped on exit."""
+    need_mosquitto()
+    pytest.importorskip("ramp.certs.authority")  # ramp certs: the one certificate authority
+    from ramp.fleet.init import write_fleet
+
+    files = write_fleet(directory, robots, supervisors, hosts=["localhost", "127.0.0.1"],
+                        manufacturer="RAMP")
+    broker = LocalBroker(tls=files.tls).start()
+    try:
+        yield files, broker
+    finally:
+        broker.close()
+
+
+def tls_of(files: FleetFiles, name: str) -> dict[str, str]:
+    """A client's TLS files from the set-up, as `Collector` and the agents take them."""
+    crt, key = files.clients[name]
+    return {"ca": str(files.tls.ca), "cert": str(crt), "key": str(key)}
 
 
 class Collector:

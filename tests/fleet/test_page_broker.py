@@ -18,25 +18,13 @@ from ramp.fleet.broker import LocalBroker
 from ramp.fleet.init import FleetFiles
 from ramp.fleet.page.cli import main as page_main
 from ramp.fleet.page.supervisor import FleetSupervisor, Tile
-from tests.fleet_fixtures import Collector, need_mosquitto
+from tests.fleet_fixtures import Collector, tls_fleet, tls_of
 
 
 @pytest.fixture(scope="module")
 def fleet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[FleetFiles, LocalBroker]]:
-    need_mosquitto()
-    pytest.importorskip("ramp.certs.authority")
-    from ramp.fleet.init import write_fleet
-
-    files = write_fleet(tmp_path_factory.mktemp("fleet"), ["r1"], ["ops"],
-                        hosts=["localhost", "127.0.0.1"], manufacturer="RAMP")
-    broker = LocalBroker(tls=files.tls).start()
-    yield files, broker
-    broker.close()
-
-
-def tls_of(files: FleetFiles, name: str) -> dict[str, str]:
-    crt, key = files.clients[name]
-    return {"ca": str(files.tls.ca), "cert": str(crt), "key": str(key)}
+    with tls_fleet(tmp_path_factory.mktemp("fleet"), ["r1"], ["ops"]) as out:
+        yield out
 
 
 def robot_says_state(files: FleetFiles, broker: LocalBroker) -> mqtt.Client:

@@ -21,25 +21,13 @@ import pytest
 from ramp.fleet import vda5050 as v
 from ramp.fleet.broker import LocalBroker
 from ramp.fleet.init import FleetFiles, acl_text, check_names
-from tests.fleet_fixtures import Collector, need_mosquitto
+from tests.fleet_fixtures import Collector, tls_fleet, tls_of
 
 
 @pytest.fixture(scope="module")
 def fleet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[FleetFiles, LocalBroker]]:
-    need_mosquitto()
-    pytest.importorskip("ramp.certs.authority")  # ramp certs: the one certificate authority
-    from ramp.fleet.init import write_fleet
-
-    files = write_fleet(tmp_path_factory.mktemp("fleet"), ["r1", "r2"], ["sup"],
-                        hosts=["localhost", "127.0.0.1"], manufacturer="RAMP")
-    broker = LocalBroker(tls=files.tls).start()
-    yield files, broker
-    broker.close()
-
-
-def tls_of(files: FleetFiles, name: str) -> dict[str, str]:
-    crt, key = files.clients[name]
-    return {"ca": str(files.tls.ca), "cert": str(crt), "key": str(key)}
+    with tls_fleet(tmp_path_factory.mktemp("fleet"), ["r1", "r2"], ["sup"]) as out:
+        yield out
 
 
 def publisher(files: FleetFiles, broker: LocalBroker, name: str) -> mqtt.Client:
