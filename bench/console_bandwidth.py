@@ -27,7 +27,7 @@ from typing import Any
 
 from bench.common import Child, Settings, progress
 
-SECONDS = {"full": 180.0, "quick": 8.0, "smoke": 2.0}
+SECONDS = {"full": 180.0, "quick": 4.0, "smoke": 2.0}
 SEED = 5
 LIMIT_BPS = 16_000
 
