@@ -40,7 +40,7 @@ from ramp.autonomy.perception.sweep import DONE, Sweep
 from ramp.simulation.perceive import perceive
 from ramp.simulation.rig import Rig, load_autonomy_config
 
-_COUNTS = {"full": (8, 5), "quick": (3, 3), "smoke": (1, 1)}  # layouts, repeats
+_COUNTS = {"full": (8, 5), "quick": (2, 2), "smoke": (1, 1)}  # layouts, repeats
 X, YAW = 0.88, 0.0
 
 
