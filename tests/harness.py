@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import re
 import select
+import signal
 import socket
 import subprocess
 import sys
@@ -233,8 +234,22 @@ def value(resp: str, key: str) -> str:
     return m.group(1)
 
 
+def end_process(proc: subprocess.Popen[Any], sig: int = signal.SIGTERM,
+                timeout: float = 10.0) -> tuple[Any, Any]:
+    """End a process a test started: `sig`, then SIGKILL if it has not gone in `timeout` s.
+    Returns `communicate()`'s (stdout, stderr): its pipes are read meanwhile, so a shutdown
+    that writes much cannot block on them. The exit code stays in `proc.returncode`."""
+    proc.send_signal(sig)  # Popen sends nothing to a process it has seen exit
+    try:
+        return proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        return proc.communicate()
+
+
 def stop_process(proc: subprocess.Popen[Any]) -> None:
-    """End a process a test started: SIGTERM, then SIGKILL if it has not gone in 5 s."""
+    """End a process a test started: SIGTERM, then SIGKILL if it has not gone in 5 s. It waits
+    for the exit, not for the end of the pipes (which `end_process` reads): nothing is read."""
     proc.terminate()
     try:
         proc.wait(timeout=5)

@@ -24,7 +24,7 @@ from ramp.fleet.broker import LocalBroker
 from ramp.fleet.sim import Proc
 from tests.fleet.schemas import validate
 from tests.fleet_fixtures import Collector, start_agent
-from tests.harness import REPO, ask_line, stop_process, value
+from tests.harness import REPO, ask_line, end_process, stop_process, value
 
 SERIAL = "marte-auto"
 
@@ -45,12 +45,7 @@ class SimMission:
 
     def close(self) -> None:
         if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.communicate(timeout=15)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.communicate()
+            end_process(self.proc, signal.SIGINT, 15)
 
 
 @pytest.fixture

@@ -26,7 +26,7 @@ import pytest
 
 from ramp.fleet import vda5050 as v
 from ramp.fleet.page.supervisor import FleetSupervisor
-from tests.harness import REPO, ask_line
+from tests.harness import REPO, ask_line, end_process
 
 
 class FakeClock:
@@ -141,12 +141,7 @@ def fleet() -> Iterator[dict[str, Any]]:
         assert "page" in out, "ramp fleet sim never served its page"
         yield out
     finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.communicate(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.communicate()
+        end_process(proc, signal.SIGINT, 30)
 
 
 @pytest.mark.timeout(300)

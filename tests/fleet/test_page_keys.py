@@ -20,7 +20,7 @@ import pytest
 from ramp.fleet import vda5050 as v
 from ramp.fleet.broker import LocalBroker
 from tests.fleet_fixtures import Collector
-from tests.harness import REPO
+from tests.harness import REPO, end_process
 
 CHROMIUM = "/usr/bin/chromium"
 
@@ -85,12 +85,7 @@ def test_space_is_stop_all_even_on_a_focused_resume_button(mosquitto: LocalBroke
             finally:
                 browser.close()
     finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.communicate()
+        end_process(proc, signal.SIGINT)
         robot.loop_stop()
         robot.disconnect()
         heard.close()

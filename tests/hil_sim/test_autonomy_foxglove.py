@@ -33,7 +33,7 @@ import pytest
 from websockets.asyncio.client import connect
 
 from ramp.cli import main
-from tests.harness import REPO, start_ramp
+from tests.harness import REPO, end_process, start_ramp
 
 pytestmark = pytest.mark.timeout(90)
 
@@ -161,8 +161,7 @@ def test_ramp_autonomy_streams_its_view_live_to_a_foxglove_client(tmp_path: Path
         assert {(p["x"], p["y"]) for p in walls} == {(0, 0), (7.38, 0), (7.38, 3.88),
                                                      (0, 3.88)}
         assert watcher.on("/pose/estimated") == []  # never localized: no pose to show
-        auto.send_signal(signal.SIGTERM)
-        _out, err = auto.communicate(timeout=15)
+        _out, err = end_process(auto, timeout=15)
         assert auto.returncode == 0, err
         assert "SIGTERM: stopping the robot" in err
     finally:
@@ -218,9 +217,4 @@ def test_a_realtime_sim_mission_streams_the_estimated_pose_beside_the_truth() ->
         assert abs(e["x"] - t["x"]) < 0.15 and abs(e["y"] - t["y"]) < 0.15
         assert any(s["state"] == "initial_localization" for s in watcher.on("/mission/state"))
     finally:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.communicate(timeout=15)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.communicate()
+        end_process(proc, timeout=15)

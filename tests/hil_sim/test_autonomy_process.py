@@ -25,7 +25,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.harness import REPO, ask_line, start_ramp
+from tests.harness import REPO, ask_line, end_process, start_ramp
 
 pytestmark = pytest.mark.timeout(90)
 
@@ -60,8 +60,7 @@ def test_ramp_autonomy_takes_control_waits_for_its_sensors_and_stops_on_sigterm(
 
         assert wait_for(lambda: owner() == "autonomy", 15.0)
         time.sleep(1.0)
-        auto.send_signal(signal.SIGTERM)
-        _out, err = auto.communicate(timeout=10)
+        _out, err = end_process(auto)
         assert auto.returncode == 0, err
         assert "initial_localization" in err
         assert "SIGTERM: stopping the robot" in err

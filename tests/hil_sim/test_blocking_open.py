@@ -20,7 +20,7 @@ from ramp.clock import MonotonicClock
 from ramp.errors import DeviceError
 from ramp.hal.simio import SimBus
 from ramp.runtime import Supervisor, build
-from tests.harness import DEMO_YAML, MARTE_YAML, FakeWorld, config_from
+from tests.harness import DEMO_YAML, MARTE_YAML, FakeWorld, config_from, end_process
 from tests.harness import ask_line as ask
 from tests.harness import start_ramp as start
 
@@ -159,8 +159,7 @@ def test_a_socket_url_whose_peer_never_accepts_holds_nothing(tmp_path: Path) -> 
             rows = health(ask(s, "robot:robot.get=()"))
             assert ask(s, "ble:ble.stop=()") == ""
     finally:
-        proc.terminate()
-        proc.communicate(timeout=10)
+        end_process(proc)
         filler.close()
         listener.close()
     log = log_path.read_text()

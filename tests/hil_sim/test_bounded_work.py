@@ -218,7 +218,7 @@ def test_lines_of_reads_never_hold_a_real_process(tmp_path: Path) -> None:
     sent at once: each `robot.get` used to sort the window, about 100 ms of one piece of work
     per line (ticks 135 ms late); now no tick may be 80 ms late (1 kHz on a shared VM has
     hiccups of its own) and nothing stalls."""
-    from tests.harness import MARTE_YAML
+    from tests.harness import MARTE_YAML, end_process
     from tests.harness import start_ramp as start
     from tests.hil_sim.test_abuse import HOST, Mcp
     from tests.hil_sim.test_abuse import health as rows
@@ -244,7 +244,6 @@ def test_lines_of_reads_never_hold_a_real_process(tmp_path: Path) -> None:
         monitor.close()
         reader.close()
     finally:
-        proc.terminate()
-        proc.communicate(timeout=10)
+        end_process(proc)
     assert proc.returncode == 0
     assert "stalled" not in log_path.read_text()

@@ -24,7 +24,7 @@ from ramp.clock import MonotonicClock, VirtualClock
 from ramp.hal.simio import SimBus
 from ramp.runtime import build
 from ramp.scheduler import Scheduler
-from tests.harness import DEMO_YAML, MARTE_YAML, REPO, FakeWorld, config_from
+from tests.harness import DEMO_YAML, MARTE_YAML, REPO, FakeWorld, config_from, end_process
 from tests.harness import ask_line as ask
 
 HOST = "127.0.0.1"
@@ -94,8 +94,7 @@ def test_eleven_hundred_clients_are_all_served_and_all_cleaned_up(tmp_path: Path
         finally:
             for c in clients:
                 c.close()
-            proc.terminate()
-            proc.communicate(timeout=10)
+            end_process(proc)
     assert proc.returncode == 0
 
 

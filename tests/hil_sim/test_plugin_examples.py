@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import importlib.metadata as md
 import re
-import signal
 import socket
 import subprocess
 import sys
@@ -14,7 +13,7 @@ from subprocess import Popen
 
 import pytest
 
-from tests.harness import ask_line, start_ramp
+from tests.harness import ask_line, end_process, start_ramp
 
 PACKAGES = {"ramp-arm": ("arm",), "ramp-winch": ("winch",)}
 
@@ -82,11 +81,5 @@ def test_scout_runs_under_ramp_run_sim() -> None:
 
 
 def _stop(proc: Popen[str]) -> None:
-    proc.send_signal(signal.SIGTERM)
-    try:
-        proc.communicate(timeout=10)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
+    end_process(proc)
     assert proc.returncode == 0

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.harness import REPO
+from tests.harness import REPO, end_process
 from tests.harness import ask_line as ask
 from tests.harness import start_ramp as start
 
@@ -23,8 +23,7 @@ def test_run_sim_serves_and_sigterm_stops_motors_and_exits_0() -> None:
             assert ask(s, "robot:robot.modules=()") == "robot:robot.modules=(base,ble)"
             assert ask(s, "base:base.drive=(60,0)") == ""
             assert "base:lf_wheel.vel=(60)" in ask(s, "base:base.get=()")
-            proc.send_signal(signal.SIGTERM)
-            out, err = proc.communicate(timeout=10)
+            out, err = end_process(proc)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -52,12 +51,7 @@ def test_the_ready_line_puts_an_ipv6_address_in_brackets() -> None:
         with socket.create_connection(("::1", port), timeout=5) as s:
             assert ask(s, "robot:robot.modules=()") == "robot:robot.modules=(base,ble)"
     finally:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:  # pragma: no cover
-            proc.kill()
-            proc.communicate()
+        end_process(proc)
 
 
 def test_config_error_exits_2_and_names_file_line_key(tmp_path: Path) -> None:
@@ -88,8 +82,7 @@ def test_systemd_notify_protocol(tmp_path: Path) -> None:
         assert sum("WATCHDOG=1" in g for g in got) >= 2
         status = next(g for g in got if g.startswith("STATUS=modules"))
         assert "base=ok" in status and "ble=ok" in status
-        proc.send_signal(signal.SIGTERM)
-        proc.communicate(timeout=10)
+        end_process(proc)
         rest = []
         sock.settimeout(1)
         try:
@@ -132,8 +125,7 @@ def test_sighup_and_sigquit_stop_the_motors_on_the_wire_and_exit_0(
                 device.service(time.monotonic())
                 time.sleep(0.01)
             assert emu.duty(128, 1) > 0.3
-            proc.send_signal(signum)
-            _, err = proc.communicate(timeout=10)
+            _, err = end_process(proc, signum)
         device.service(time.monotonic())
     finally:
         if proc.poll() is None:

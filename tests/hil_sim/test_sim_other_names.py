@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.harness import MARTE_YAML, SimHarness
+from tests.harness import MARTE_YAML, SimHarness, end_process
 from tests.harness import ask_line as ask
 from tests.harness import start_ramp as start
 
@@ -57,7 +57,6 @@ def test_ramp_run_sim_starts_with_module_names_of_its_own(tmp_path: Path) -> Non
             assert ask(s, "chassis:chassis.drive=(30,0)") == ""
             assert "chassis:lf_wheel.vel=(30)" in ask(s, "chassis:chassis.get=()")
     finally:
-        proc.terminate()
-        _, err = proc.communicate(timeout=10)
+        _, err = end_process(proc)
     assert proc.returncode == 0, err
     assert "KeyError" not in err and "Traceback" not in err

@@ -19,6 +19,8 @@ from collections.abc import Iterator
 
 import pytest
 
+from tests.harness import end_process
+
 websockets_sync = pytest.importorskip("websockets.sync.client")
 
 FD_LIMIT = 128
@@ -42,12 +44,7 @@ class Teleop:
         self.port = int(m.group(1))
 
     def stop(self) -> str:
-        self.proc.send_signal(signal.SIGINT)
-        try:
-            _, err = self.proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            _, err = self.proc.communicate(timeout=10)
+        _, err = end_process(self.proc, signal.SIGINT)
         return err
 
 
