@@ -59,7 +59,10 @@ def test_messages_validate_and_stop_pause_holds(robot: tuple[str, int], mosquitt
         kinds = {a["actionType"] for a in sheet["protocolFeatures"]["agvActions"]}
         assert {"stopPause", "startPause", "cancelOrder", "stateRequest",
                 "factsheetRequest"} <= kinds and "rmcMission" not in kinds
-        state = master.wait_for("/state", lambda m: m["operatingMode"] == "SERVICE")
+        # The first states may come before the agent has heard its backend (SERVICE, with a
+        # backendUnreachable error and no battery reading): wait for one that has.
+        state = master.wait_for("/state", lambda m: m["operatingMode"] == "SERVICE" and not any(
+            e["errorType"] == "backendUnreachable" for e in m["errors"]))
         assert state["batteryState"]["batteryVoltage"] > 10
         # An operator drives the robot (and keeps feeding the watchdog).
         op = socket.create_connection(robot)
