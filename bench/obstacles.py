@@ -37,7 +37,7 @@ from ramp.autonomy.perception.obstacles import (
 )
 from tests.obstacle_scenes import match, scan_world
 
-_COUNTS = {"full": (12, 5), "quick": (4, 3), "smoke": (1, 1)}  # layouts, repeats
+_COUNTS = {"full": (12, 5), "quick": (3, 2), "smoke": (1, 1)}  # layouts, repeats
 _BANDS = ((0.0, 1.0), (1.0, 2.0), (2.0, 3.0), (3.0, 4.0))
 X, Y, YAW = 0.9, 1.94, 0.0  # the robot at the start region's front edge, facing +x
 

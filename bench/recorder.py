@@ -70,7 +70,7 @@ QUEUE_RECORDS = 2_000     # 1.4 s of this traffic
 CROWDED_FILES = 50_000
 CROWDED_MAX_MB = 0.1
 #: (tick run seconds, encode calls per kind, ramp run seconds) by profile
-PROFILE = {"full": (30.0, 20_000, 30.0), "quick": (1.5, 2_000, 1.5),
+PROFILE = {"full": (30.0, 20_000, 30.0), "quick": (1.0, 2_000, 1.0),
            "smoke": (0.6, 200, 0.6)}
 SUP_CLIENTS = 4
 SUP_HZ = 50.0
