@@ -113,6 +113,8 @@ class SafetyModel(RuleBasedStateMachine):
         #: When each module was last stopped by a request: its wire may turn for TOL more.
         self.stopped_at: dict[str, float] = {}
         self.unplugged_at: dict[str, float] = {}
+        #: The watchdog was `armed` at the last check.
+        self.was_armed = False
 
     # -- helpers ------------------------------------------------------------------------------
     @property
@@ -299,6 +301,19 @@ class SafetyModel(RuleBasedStateMachine):
         wire = {module: [self.emu_duty(b, a, m) for b, a, m in motors if not self.exempt(b)]
                 for module, motors in WIRE.items()}
         spinning = any(d != 0.0 for duties in wire.values() for d in duties)
+        if armed:
+            self.was_armed = True
+        elif self.was_armed:
+            # SPEC 2.2: leaving `armed` stops every module and forgets every commander. A
+            # command sent just before may still be on its way, ahead of the zeros (found by
+            # this test: a dig, then its client gone at once), so each wire may turn for TOL
+            # more, as after a stop request. A late trip fails the lag check while still armed.
+            self.was_armed = False
+            for module in WIRE:
+                self.stopped_at[module] = now
+            self.commanders.clear()
+        elif not spinning:
+            self.commanders.clear()  # never armed and still: nothing is commanded
         moving = {module: any(d != 0.0 for d in wire[module]) or (
             sup.slots[module].state == "ok" and sup.slots[module].module.is_moving())
             for module in WIRE}
@@ -317,10 +332,6 @@ class SafetyModel(RuleBasedStateMachine):
                         f"{module} moves at {now:.2f}: a commander "
                         f"{'gone' if c.gone_at is not None else 'silent'} {lag:.3f} s past "
                         f"its timeout {c.timeout}; wire {wire}")
-        if not armed and not spinning:
-            # SPEC 2.2: the commanders are forgotten whenever the watchdog leaves `armed`
-            # (once the stop is on the wire: until then, the lag above is checked).
-            self.commanders.clear()
         # the backend's count of commanders agrees with the model's
         alive = {id(c) for (module, _), c in self.commanders.items()
                  if c.gone_at is None and moving[module]
@@ -351,3 +362,38 @@ SafetyModel.TestCase.settings = settings(
 def test_spec_2_2_holds_on_the_wire() -> None:
     SafetyModel.TestCase().runTest()
     print(f"longest a motor turned past a commander's timeout: {WORST_LAG[0] * 1e3:.0f} ms")
+
+
+def test_a_command_still_on_the_wire_when_its_client_goes_is_followed_by_the_stop() -> None:
+    """The steps this model once failed on (CI): a dig, its client gone at once. The dig's
+    packet reaches the controller after the trip, ahead of the zeros: the chain turns for a
+    packet's wire time, within TOL of the loss, then stops."""
+    m = SafetyModel()
+    try:
+        m.two_clients(chatty=[False, False, False])
+        m.wait(seconds=12.0)
+        m.dig(chatty=False, i=0, pause=0.0, text="ble:chain.vel=(50)")
+        m.check()
+        m.disconnect(i=0, pause=0.0)
+        m.check()
+        m.wait(seconds=2.0)
+        assert m.h.sup.robot.watchdog.state != "armed"
+        assert all(m.emu_duty(*motor) == 0.0 for motor in WIRE["ble"])
+    finally:
+        m.teardown()
+
+
+def test_a_new_client_commanding_after_a_trip_is_not_held_to_the_gone_ones_timeout() -> None:
+    """The next steps it failed on: after that trip a new client lifts; the gone client's
+    chain command was forgotten with the trip, so only the new client's talk counts."""
+    m = SafetyModel()
+    try:
+        m.two_clients(chatty=[False, False, False])
+        m.dig(chatty=False, i=0, pause=0.0, text="ble:chain.vel=(50)")
+        m.disconnect(i=0, pause=0.0)
+        m.check()
+        m.connect(chatty=False, i=0, pause=0.0)
+        m.dig(chatty=False, i=0, pause=0.3, text="ble:lift.vel=(80)")
+        assert m.emu_duty(*LIFT) != 0.0  # the new client's lift moves while it may
+    finally:
+        m.teardown()
