@@ -229,26 +229,20 @@ class SimBackplane:
     def tick(self, now: float, dt: float) -> None:
         self._watch_ptys()
         watched = self._watched
-        # (Every pty is watched by the loop's wait in `ramp sim`: none to look at here then.)
-        if len(watched) < len(self.sabertooth):
-            # One look at every pty the wait does not watch, then read those with bytes.
-            ready = self._readable_unwatched()
-            for name, device in self.sabertooth.items():
-                if name in watched or name in self.dead:
-                    continue
-                try:
-                    if device.link.master_fd in ready:
-                        device.service(now)
-                    else:
-                        device.emulator.tick(now)
-                except Exception as exc:  # noqa: BLE001 - emulator code: its own bus's fault
-                    self._device_faulted(name, exc)
+        # One look at every pty the loop's wait does not watch (none in `ramp sim`, whose wait
+        # watches them all): those with bytes are read; the others only run their timers
+        # (a watched pty's bytes are read the moment it is readable, `_serve`).
+        ready = self._readable_unwatched() if len(watched) < len(self.sabertooth) else ()
         for name, device in self.sabertooth.items():
-            if name in watched and name not in self.dead:
-                try:
-                    device.emulator.tick(now)  # its bytes are read when the pty is readable
-                except Exception as exc:  # noqa: BLE001 - emulator code: its own bus's fault
-                    self._device_faulted(name, exc)
+            if name in self.dead:
+                continue
+            try:
+                if name not in watched and device.link.master_fd in ready:
+                    device.service(now)
+                else:
+                    device.emulator.tick(now)
+            except Exception as exc:  # noqa: BLE001 - emulator code: its own bus's fault
+                self._device_faulted(name, exc)
         for service in self.services:
             try:
                 service(now)
