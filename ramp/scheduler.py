@@ -16,6 +16,14 @@ the budget.
 With a virtual clock the wait polls I/O once without blocking and jumps the clock to the next
 deadline, so simulated minutes pass in seconds and runs repeat exactly.
 
+Idle ticks: while nothing moves or is about to (the owner's `idle` predicate: the watchdog not
+armed, every bus at rest), the next tick comes `idle_stride` base periods later instead of one,
+the way a tickless kernel idles: fewer wake-ups of a robot that only waits, the same rate the
+moment it moves. Tasks keep their grid (a 10 Hz task still runs every tenth base slot), see the
+real time since their last run as `dt`, and I/O is served the moment it arrives as always; a
+request that arms the watchdog calls `hurry()`, which brings the tick back to the next base slot.
+The stride never reaches the stall limit (at most half of it).
+
 Stalls (SPEC 2.2, *Stalls and freezes*): before every unit of work (a task, an I/O callback,
 the wait) the loop compares the clock with the start of the last tick. More than
 `stall_limit` since then means the loop did not run (a stuck task, a blocked call, the process
@@ -133,7 +141,8 @@ class Scheduler:
     """Runs tasks at integer divisors of a base rate, and I/O callbacks between ticks."""
 
     def __init__(self, clock: Clock, rate_hz: float = 100.0,
-                 overrun_log_interval: float = 5.0, stall_limit: float = 0.25) -> None:
+                 overrun_log_interval: float = 5.0, stall_limit: float = 0.25,
+                 idle_rate_hz: float | None = None) -> None:
         if not (math.isfinite(rate_hz) and 0 < rate_hz <= 2000):
             raise ValueError(f"scheduler rate {rate_hz} Hz is outside 0-2000")
         self.clock = clock
@@ -141,6 +150,12 @@ class Scheduler:
         self.period = 1.0 / self.rate_hz
         #: A loop waiting out a long period is not stalled: never less than two periods.
         self.stall_limit = max(stall_limit, 2 * self.period)
+        #: Base periods per tick while `idle()` holds (1: every tick, the default).
+        self.idle_stride = self.stride_for(idle_rate_hz)
+        #: The owner's "nothing moves or is about to" (None: never idle).
+        self.idle: Callable[[], bool] | None = None
+        #: (deadline, index) of the next base slot while the wait is stretched, else None.
+        self._unstretched: tuple[float, int] | None = None
         #: Set by the owner (the supervisor): stops every module. None: stalls are not checked.
         self.on_stall: StallHandler | None = None
         #: Observer hook: (now, lateness in s) as every tick starts. None costs nothing.
@@ -175,6 +190,30 @@ class Scheduler:
         self._overrun_log_interval = overrun_log_interval
         self._last_overrun_log = -math.inf
         self._overruns_unlogged = 0
+
+    def stride_for(self, idle_rate_hz: float | None) -> int:
+        """Base periods per idle tick for `idle_rate_hz` (None or the base rate: 1), rounded
+        down to a whole number and kept to at most half the stall limit."""
+        if idle_rate_hz is None:
+            return 1
+        if not (math.isfinite(idle_rate_hz) and idle_rate_hz > 0):
+            raise ValueError(f"idle tick rate {idle_rate_hz!r} Hz is not a positive number")
+        stride = max(1, int(self.rate_hz / idle_rate_hz + 1e-9))
+        return max(1, min(stride, int(self.stall_limit / (2 * self.period) + 1e-9)))
+
+    def hurry(self) -> None:
+        """Motion is starting (a request armed the watchdog) during a stretched idle wait:
+        the next tick comes at the next base slot instead of the end of the stride."""
+        slot = self._unstretched
+        if slot is None:
+            return
+        self._unstretched = None
+        deadline, index = slot
+        late = self.clock.now() - deadline
+        skip = math.ceil(late / self.period) if late > 0.0 else 0
+        if deadline + skip * self.period < self._next:  # type: ignore[operator]
+            self._next = deadline + skip * self.period
+            self._index = index + skip
 
     # -- registration -------------------------------------------------------------------------
     def add_task(self, name: str, rate_hz: float, fn: TaskFn) -> ScheduledTask:
@@ -315,7 +354,7 @@ class Scheduler:
         """Exactly one iteration: wait for the next deadline servicing I/O, then tick."""
         if self._next is None:
             self._next = self.clock.now()
-        self._wait(self._next)
+        self._wait()
         self._tick(self._next)
 
     def poll_io(self, timeout: float = 0.0, deadline: float | None = None) -> int:
@@ -402,14 +441,18 @@ class Scheduler:
                 w.append(fd)
         return r, w
 
-    def _wait(self, deadline: float) -> None:
+    def _wait(self) -> None:
+        """Serve I/O until the next tick's deadline (`_next`, which `hurry` may move)."""
+        deadline: float = self._next  # type: ignore[assignment]
         if isinstance(self.clock, VirtualClock):
             self.poll_io(0.0, deadline)
+            deadline = self._next  # type: ignore[assignment]
             if self.clock.now() < deadline:
                 self.clock.set(deadline)
             return
         polled = False
         while True:
+            deadline = self._next  # type: ignore[assignment]
             remaining = deadline - self.clock.now()
             if remaining <= 0:
                 if not polled:  # a late tick still lets one client's turn through
@@ -500,6 +543,21 @@ class Scheduler:
             self._log_overrun(after - deadline)
             self._index += extra
             self._next += extra * self.period
+        # Idle: the next tick `idle_stride` slots on (an overrun is still the base period's).
+        self._unstretched = None
+        stride = self.idle_stride
+        if stride > 1 and self.idle is not None and self._is_idle():
+            self._unstretched = (self._next, self._index)
+            self._index += stride - 1
+            self._next += (stride - 1) * self.period
+
+    def _is_idle(self) -> bool:
+        """The owner's predicate, guarded: an error in it means "not idle" (every tick)."""
+        try:
+            return bool(self.idle())  # type: ignore[misc]
+        except Exception:
+            log.exception("the idle predicate raised; ticking at the base rate")
+            return False
 
     def _blame(self, name: str, spent: float) -> str:
         return f"{name} ({spent * 1e3:.1f} ms)" if name else "no task (the OS)"

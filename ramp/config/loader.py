@@ -68,6 +68,9 @@ SCHEDULER_FIELDS = {
     "rate_hz": Field(float, 100.0, lo=1.0, hi=1000.0, what="a tick rate in Hz"),
     "stall_limit": Field(float, 0.25, lo=0.02, hi=10.0,
                          what="seconds a tick may stall before motors are stopped"),
+    "idle_rate_hz": Field(float, None, lo=1.0, hi=1000.0,
+                          what="a tick rate in Hz while nothing moves (the base rate: never "
+                               "slower)"),
 }
 BUS_COMMON = {"driver", "sim"}
 
@@ -123,6 +126,9 @@ class Config:
     watchdog_timeout: float = 1.0
     rate_hz: float = 100.0
     stall_limit: float = 0.25
+    #: `scheduler.idle_rate_hz`: the tick rate while nothing moves; None (not set): 20 Hz on
+    #: the wall clock, every tick on a virtual one (`ramp.runtime.build.IDLE_RATE_HZ`).
+    idle_rate_hz: float | None = None
     buses: Mapping[str, BusConfig] = field(default_factory=dict)
     modules: Mapping[str, ModuleConfig] = field(default_factory=dict)
     #: The flight recorder (`recorder:`), None when the block is absent: not recording.
@@ -259,6 +265,7 @@ def parse_config(text: str, name: str = "ramp.yaml") -> tuple[Config | None, lis
         watchdog_timeout=wd["timeout"],
         rate_hz=sched["rate_hz"],
         stall_limit=sched["stall_limit"],
+        idle_rate_hz=sched["idle_rate_hz"],
         buses=MappingProxyType(buses),
         modules=MappingProxyType(modules),
         recorder=recorder,

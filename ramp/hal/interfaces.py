@@ -52,6 +52,10 @@ KINDS = ("motor", "analog_in", "digital_in", "digital_out", "bridge_in", "servo"
 CommandHook = Callable[[str, float], None]
 
 
+#: A servo this close to its target (degrees) is where it was sent.
+SERVO_AT_REST_DEG = 0.5
+
+
 class MotorChannel:
     """One motor output. `duty` is signed, -1..1, as the controller sees it (no polarity)."""
 
@@ -410,6 +414,23 @@ class Bus(ABC):
         that attaches asynchronously and is not plugged in); "" otherwise. The runtime logs
         it once and says "back" only when the bus becomes ready."""
         return ""
+
+    def at_rest(self) -> bool:
+        """Nothing on this bus moves or is about to: every motor at 0, every servo where it
+        was sent, no command waiting to go out (`output_queued`). While every bus is at rest
+        and no client commands motion, the loop ticks at `scheduler.idle_rate_hz`."""
+        for m in self.motors:
+            if m.duty:
+                return False
+        for sv in self.servos:
+            if sv.target is not None and not abs(sv.target - sv.position) <= SERVO_AT_REST_DEG:
+                return False
+        return not self.output_queued()
+
+    def output_queued(self) -> bool:
+        """Driver hook: commands accepted and not yet on the wire (a paced link), which the
+        bus's next ticks send."""
+        return False
 
     def fileno(self) -> int | None:
         """A file descriptor the scheduler can wait on for input (or a hang-up), or None."""

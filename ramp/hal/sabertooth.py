@@ -258,6 +258,10 @@ class SabertoothBus(Bus):
             self._due_at = min(refresh, program)
         return self._due_at
 
+    def output_queued(self) -> bool:
+        """Packets waiting for the wire's budget, or a packet half written."""
+        return bool(self._pending or self._tail)
+
     # No `fileno()` for the loop to watch: a tty in the loop's wait is polled by the kernel
     # at every wake-up (every request answered), which costs more than one look per tick.
 

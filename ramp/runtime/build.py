@@ -52,6 +52,12 @@ def default_bus_factory(bc: BusConfig) -> Bus:
     return driver_class(bc.driver)(bc.name, bc.params)
 
 
+#: The tick rate while nothing moves (`scheduler.idle_rate_hz`) when the file sets none, on
+#: the wall clock. A virtual clock spends no wall time waiting, so there it ticks at the base
+#: rate unless the file asks: simulated runs and tests keep their exact sampling.
+IDLE_RATE_HZ = 20.0
+
+
 def build(config: Config, clock: Clock | None = None, bus_factory: BusFactory | None = None,
           *, host: str | None = None, port: int | None = None,
           observer: Observer | None = None, recorder: Recorder | None = None) -> Supervisor:
@@ -62,7 +68,11 @@ def build(config: Config, clock: Clock | None = None, bus_factory: BusFactory | 
     closes it at shutdown.
     Raises ConfigError for what only building can find (two devices on one channel ...)."""
     clock = clock or MonotonicClock()
-    scheduler = Scheduler(clock, config.rate_hz, stall_limit=config.stall_limit)
+    idle_hz = config.idle_rate_hz
+    if idle_hz is None and not clock.virtual:
+        idle_hz = IDLE_RATE_HZ
+    scheduler = Scheduler(clock, config.rate_hz, stall_limit=config.stall_limit,
+                          idle_rate_hz=idle_hz)
     factory = bus_factory or default_bus_factory
     buses: dict[str, Bus] = {}
     for name, bc in config.buses.items():

@@ -134,6 +134,20 @@ class BusManager:
                 continue
         return True
 
+    def at_rest(self) -> bool:
+        """No open is in flight, every open bus is ready and at rest (`Bus.at_rest`): the loop
+        may tick at its idle rate. A driver whose check raises counts as busy (its next tick
+        faults it if it is broken)."""
+        if self.opener.in_flight or self._waiting:
+            return False
+        for bus in self.buses.values():
+            try:
+                if bus.is_open and not bus.at_rest():
+                    return False
+            except Exception:  # noqa: BLE001 - plugin driver code: never idle on a doubt
+                return False
+        return True
+
     def close_all(self) -> None:
         """Zeros on every wire, then every port closes. Idempotent; a driver that raises
         while closing never keeps the other buses open."""

@@ -129,10 +129,19 @@ class Supervisor:
                              slot.name, task.name, rate, task.rate_hz, sched.rate_hz)
                 sched.add_task(f"{slot.name}.{task.name}", rate,
                                self._module_task(slot, task.name, task.run))
+        # Idle ticks (`scheduler.idle_rate_hz`): slower while nothing moves, the base rate
+        # from the request that arms the watchdog on.
+        sched.idle = self.at_rest
+        self.robot.watchdog.on_arm = sched.hurry
         self.server.start()
         self.running = True
         if self.observer is not None:
             self.observer.started(self)
+
+    def at_rest(self) -> bool:
+        """Nothing moves or is about to: no client commands motion (the watchdog is not
+        armed) and every bus is ready and at rest. The loop ticks at its idle rate then."""
+        return self.robot.watchdog.state != "armed" and self.bus_manager.at_rest()
 
     def settle(self, limit: float = 2.0, open_limit: float = 0.5) -> None:
         """Run the loop (serving) until every opened bus reports ready, at most `limit` s.

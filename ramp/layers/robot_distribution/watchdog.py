@@ -69,6 +69,8 @@ class Watchdog:
         self.trips = 0
         #: Observer hook (the flight recorder): None costs nothing.
         self.on_change: WatchdogHook | None = None
+        #: Called when a request arms it (the loop leaves its idle ticks). None: nothing.
+        self.on_arm: Callable[[], None] | None = None
         self._why = ""
         self._machine = Machine(model=self, states=list(STATES), transitions=TRANSITIONS,
                                 initial="idle", auto_transitions=False, queued=True,
@@ -93,6 +95,8 @@ class Watchdog:
         commanders[(module, device)] = client
         if self.state != "armed":
             self._go(self._arm, "motion", now)
+            if self.on_arm is not None:
+                self.on_arm()
         return before
 
     def undo(self, before: tuple[dict[tuple[str, str], Client], str], now: float) -> None:
