@@ -328,10 +328,13 @@ def load_marte() -> dict[str, Any]:
 
 def write_config(workdir: Path, name: str, *, base_port: str | None = None,
                  watchdog_timeout: float | None = None,
-                 ports: dict[str, str] | None = None) -> Path:
+                 ports: dict[str, str] | None = None, every_tick: bool = False) -> Path:
     """ramp.yaml served on 127.0.0.1:0; `base_port` makes base_motors a real driver on it
-    (under --sim); `ports` moves buses to other ports (bus name -> port)."""
+    (under --sim); `ports` moves buses to other ports (bus name -> port); `every_tick`: no
+    idle ticks (`scheduler.idle_rate_hz` set to the base rate), every base period ticks."""
     data = load_marte()
+    if every_tick:
+        data["scheduler"]["idle_rate_hz"] = data["scheduler"]["rate_hz"]
     data["server"]["host"] = "127.0.0.1"
     data["server"]["port"] = 0
     if base_port is not None:

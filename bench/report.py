@@ -179,6 +179,9 @@ def render(doc: dict[str, Any]) -> str:
                 _row(f"VmRSS after {s['rss_mb_after']['seconds']:g} s", s["rss_mb_after"], " MB"),
                 *([_row("idle CPU % of a core (baseline: bare select loop)",
                         s["idle_cpu_pct"], "")] if "idle_cpu_pct" in s else []),
+                *([_row("idle CPU %, idle ticks off (every base period)",
+                        s["idle_cpu_pct_every_tick"], "")]
+                  if "idle_cpu_pct_every_tick" in s else []),
                 _row("SIGTERM → exit, median", s["sigterm_to_exit_ms"]["median"], " ms"), ""]
     a = doc.get("autonomy_sensors")
     if a and "error" not in a:
