@@ -1,7 +1,7 @@
 """Idle ticks on the whole supervisor (`scheduler.idle_rate_hz`): MARTE at rest ticks at 20 Hz,
 a motion request brings every base tick back from the next slot, a stop lets it rest again;
 what is still on its way to a wire, a servo still travelling or a bus still opening keeps the
-base rate."""
+base rate, and so does a robot with an interlock rule that stops or latches (Scout's bumper)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 
 from ramp.hal.interfaces import SERVO_AT_REST_DEG, MotorChannel, ServoChannel
 from ramp.runtime.build import IDLE_RATE_HZ
-from tests.harness import MARTE_YAML, SimHarness, config_from
+from tests.harness import MARTE_YAML, SCOUT_YAML, SimHarness, config_from, value
 
 IDLE_YAML = MARTE_YAML.replace("scheduler: {rate_hz: 100}",
                                "scheduler: {rate_hz: 100, idle_rate_hz: 20}")
@@ -122,3 +122,29 @@ def test_the_wall_clock_default_is_the_idle_rate_and_a_virtual_clock_ticks_every
     every = config_from(MARTE_YAML.replace("port: 5577", "port: 0").replace(
         "scheduler: {rate_hz: 100}", "scheduler: {rate_hz: 100, idle_rate_hz: 100}"))
     assert build(every, MonotonicClock(), host="127.0.0.1", port=0).scheduler.idle_stride == 1
+
+
+SCOUT_IDLE_YAML = SCOUT_YAML.replace("scheduler: {rate_hz: 100}",
+                                     "scheduler: {rate_hz: 100, idle_rate_hz: 20}")
+
+
+@pytest.mark.parametrize("press_s", [0.035, 0.045])
+def test_a_robot_with_a_latching_rule_keeps_the_base_rate_so_a_short_bump_latches(
+        press_s: float) -> None:
+    """Scout's `bumper` rule stops and latches on a debounced input (20 ms at 100 Hz): at
+    20 Hz a press shorter than two idle ticks would fall between samples and never latch.
+    Such a robot ticks at the base rate at rest too."""
+    assert SCOUT_IDLE_YAML != SCOUT_YAML
+    h = SimHarness(SCOUT_IDLE_YAML, marte=False)
+    try:
+        assert h.sup.scheduler.idle_stride == 1
+        c = h.connect()
+        h.advance(0.513)
+        assert h.sup.at_rest()
+        assert c.ask("sim:input.set=(base,bumper_left,1)") == ""
+        h.advance(press_s)
+        assert c.ask("sim:input.clear=(base,bumper_left)") == ""
+        h.advance(0.3)
+        assert "bumper" in value(c.ask("robot:robot.get=()"), "robot:interlock.active")
+    finally:
+        h.close()
