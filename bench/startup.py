@@ -136,14 +136,14 @@ def run(settings: Settings, workdir: Path) -> dict[str, Any]:
             loop_cpu = loop.finish(t0, t1, loop1 - loop0)["cpu_pct"]
         finally:
             loop.child.kill()
-            every.kill()
+            every.kill()  # before the memory readings: its CPU is no longer wanted
         rss_later = (ramp.status_kb("VmRSS"), bare.status_kb("VmRSS"))
         hwm = (ramp.status_kb("VmHWM"), bare.status_kb("VmHWM"))
         threads = ramp.status_kb("Threads")
         ramp_stop.append(_stop_ms(ramp))
         bare_stop.append(_stop_ms(bare))
     finally:
-        for child in (ramp, bare):
+        for child in (ramp, bare, every):
             if child is not None:
                 child.kill()
 

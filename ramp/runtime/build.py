@@ -58,6 +58,23 @@ def default_bus_factory(bc: BusConfig) -> Bus:
 IDLE_RATE_HZ = 20.0
 
 
+def idle_rate(config: Config, clock: Clock) -> float | None:
+    """The tick rate while nothing moves (None: every base period). Not on a robot with an
+    interlock rule that stops or latches: such a rule is a safety event (a bumper), and what
+    it reads is sampled and debounced by tasks at their own rate; at the idle rate a short
+    press could fall between two samples and never latch, and a held one would take several
+    idle ticks."""
+    hz = config.idle_rate_hz
+    if hz is None and not clock.virtual:
+        hz = IDLE_RATE_HZ
+    events = [r.name for r in config.interlocks if r.latch or r.action == "stop"]
+    if hz is not None and config.rate_hz / hz >= 2 - 1e-9 and events:  # a stride of 2+
+        log.info("idle ticks off: the loop ticks at %g Hz at rest too, for the interlock "
+                 "rules that stop or latch (%s)", config.rate_hz, ", ".join(events))
+        return None
+    return hz
+
+
 def build(config: Config, clock: Clock | None = None, bus_factory: BusFactory | None = None,
           *, host: str | None = None, port: int | None = None,
           observer: Observer | None = None, recorder: Recorder | None = None) -> Supervisor:
@@ -68,11 +85,8 @@ def build(config: Config, clock: Clock | None = None, bus_factory: BusFactory | 
     closes it at shutdown.
     Raises ConfigError for what only building can find (two devices on one channel ...)."""
     clock = clock or MonotonicClock()
-    idle_hz = config.idle_rate_hz
-    if idle_hz is None and not clock.virtual:
-        idle_hz = IDLE_RATE_HZ
     scheduler = Scheduler(clock, config.rate_hz, stall_limit=config.stall_limit,
-                          idle_rate_hz=idle_hz)
+                          idle_rate_hz=idle_rate(config, clock))
     factory = bus_factory or default_bus_factory
     buses: dict[str, Bus] = {}
     for name, bc in config.buses.items():

@@ -136,21 +136,11 @@ class Supervisor:
             self.observer.started(self)
 
     def _idle_ticks(self, sched: Scheduler) -> None:
-        """Idle ticks (`scheduler.idle_rate_hz`): slower while nothing moves, the base rate
-        from the request that arms the watchdog on. Not on a robot with a rule that stops or
-        latches: such a rule is a safety event (a bumper), and what it reads is sampled and
-        debounced by tasks at their own rate; at the idle rate a short press could fall
-        between two samples and never latch, and a held one would take several idle ticks."""
-        if sched.idle_stride <= 1:
-            return
-        events = [r.name for r in self.config.interlocks if r.latch or r.action == "stop"]
-        if events:
-            log.info("idle ticks off: the loop ticks at %g Hz at rest too, for the interlock "
-                     "rules that stop or latch (%s)", sched.rate_hz, ", ".join(events))
-            sched.idle_stride = 1
-            return
-        sched.idle = self.at_rest
-        self.robot.watchdog.on_arm = sched.hurry
+        """Idle ticks (`scheduler.idle_rate_hz`, `ramp.runtime.build.idle_rate`): slower while
+        nothing moves, the base rate from the request that arms the watchdog on."""
+        if sched.idle_stride > 1:
+            sched.idle = self.at_rest
+            self.robot.watchdog.on_arm = sched.hurry
 
     def at_rest(self) -> bool:
         """Nothing moves or is about to: no client commands motion (the watchdog is not
