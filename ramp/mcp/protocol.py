@@ -362,6 +362,11 @@ class LineSplitter:
         """Bytes held for an incomplete message (never more than max_line + 1)."""
         return len(self._buf)
 
+    @property
+    def empty(self) -> bool:
+        """Nothing held: the next bytes start a new message."""
+        return not self._buf and not self._discarding
+
     def feed(self, data: bytes) -> list[bytes | TooLong]:
         """Add received bytes; return every message they complete, in order."""
         if not isinstance(data, bytes):

@@ -600,3 +600,17 @@ def test_splitter_any_chunking_matches_whole_split(
     expected, pending = _split_whole(stream, max_line)
     assert out == expected
     assert s.pending == pending
+
+
+def test_the_splitter_is_empty_only_between_messages() -> None:
+    s = LineSplitter(max_line=8)
+    assert s.empty
+    assert s.feed(b"a:b.c=()\n") == [b"a:b.c=()"] and s.empty
+    s.feed(b"a:b")
+    assert not s.empty
+    s.feed(b".c=()\n")
+    assert s.empty
+    s.feed(b"x" * 20)  # too long: discarded until its newline
+    assert not s.empty
+    s.feed(b"\n")
+    assert s.empty

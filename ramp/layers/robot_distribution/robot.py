@@ -188,6 +188,30 @@ class RobotDistribution:
         for itself), before its requests are handled."""
         ctx.client.last_heard = self.now = ctx.now
 
+    def heard(self, client: Client, now: float) -> None:
+        """`message` for a caller that has no request context to make (the server's repeat
+        answers)."""
+        client.last_heard = self.now = now
+
+    def versioned(self, req: Request) -> bool:
+        """Whether `req`'s answer is a pure function of `version`: a read answered by its
+        function's `line` (a `get`, a `describe`) of a module usable now. Such an answer can
+        be kept and given again to the same message while the version holds, by the same
+        argument that lets the module keep it (see the module docstring)."""
+        module = req.module
+        if module == "robot":
+            target: Module | None = self.robot
+        else:
+            slot = self.slots.get(module)
+            if slot is not None:
+                target = slot.module if slot.state == "ok" else None
+            else:
+                target = self.extra.get(module)
+        if target is None or req.params:
+            return False
+        fn = target.functions.get((req.device, req.function))
+        return fn is not None and fn.kind == "read" and fn.line is not None and not fn.params
+
     def request(self, ctx: RequestContext, req: Request) -> bytes:
         """One request: its answer as it goes on the wire (b"" for an accepted action)."""
         module = req.module

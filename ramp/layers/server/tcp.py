@@ -12,6 +12,13 @@ chunk, then answers its queued messages request by request until the tick's dead
 short slice, so other clients interleave); whatever is left, even half a message, is taken up
 again in its next turn, after the tick. A client that half-closes (sends FIN) is treated as
 gone for the watchdog and arbitration at once, but still receives every answer it is owed.
+
+Answers given again: a client repeats the same few lines (a poll of `base.get`) thousands of
+times, and a read answered by its function's `line` is a pure function of the robot's state
+version (`ramp.layers.robot_distribution`). Such an answer is kept by the message's bytes; a
+read that brings exactly that message, whole, with nothing held before it, while the version
+is the one it was made at, is answered with the kept line without parsing or routing. The
+message is still heard (the watchdog) and observed (the recorder's hooks).
 """
 
 from __future__ import annotations
@@ -28,6 +35,7 @@ from collections.abc import Callable
 
 from ramp.common.access import RANK, AccessConfig, is_loopback
 from ramp.common.hostport import format_hostport
+from ramp.layers.module_distribution.router import Version
 from ramp.layers.robot_distribution import Client, RequestContext, RobotDistribution
 from ramp.layers.server.gate import (
     HANDSHAKE_S,
@@ -111,6 +119,8 @@ class Connection(Client):
 #: complete message in, and (client, clock time, the answer line) for every line out.
 MessageInHook = Callable[[Client, float, "bytes | TooLong"], None]
 MessageOutHook = Callable[[Client, float, bytes], None]
+#: An answer the server may give again: (the version it was made at, the message, the line).
+KeptAnswer = tuple[Version, bytes, bytes]
 
 
 class McpServer:
@@ -149,6 +159,9 @@ class McpServer:
         #: Parsed short messages by their bytes: parsing is a pure function of them, and a
         #: client repeats the same few lines (a poll, a heartbeat) thousands of times.
         self._parsed: dict[bytes, tuple[tuple[Request, ...], bytes]] = {}
+        #: Answers to give again (`_keep`), by the message's bytes, and by them with their
+        #: `\n` as one read brings a whole message (no message holds a `\n`: no clash).
+        self._answers: dict[bytes, KeptAnswer] = {}
         #: Mutual TLS (SPEC 13): the robot's context, None for plain TCP only.
         self.tls = tls
         self.access = access if access is not None else AccessConfig()
@@ -517,11 +530,17 @@ class McpServer:
             if not data:
                 self._end_input(conn)
                 return
-            messages = conn.splitter.feed(data)
-            if messages:
-                conn.last_message_at = now
-                conn.queue.extend(messages)
-        self._work(conn, now, end)
+            again = self._answers.get(data)
+            if again is not None and again[0] == self.robot.version and conn.splitter.empty:
+                self._answer_again(conn, now, again)
+            else:
+                messages = conn.splitter.feed(data)
+                if messages:
+                    conn.last_message_at = now
+                    conn.queue.extend(messages)
+                self._work(conn, now, end)
+        else:
+            self._work(conn, now, end)
         if conn.closed:
             return
         more = conn.ctx is not None or bool(conn.queue)
@@ -544,6 +563,31 @@ class McpServer:
                 self._parsed[msg] = parsed
         return parsed
 
+    def _answer_again(self, conn: Connection, now: float, again: KeptAnswer) -> None:
+        """A message answered before, whole in one read, while the version that answer was
+        made at still holds: the same line again, without parsing or routing it. Everything
+        else is as for any message (heard, observed)."""
+        _, msg, line = again
+        conn.last_message_at = now
+        self.robot.heard(conn, now)
+        if self.on_message_in is not None:
+            self.on_message_in(conn, now, msg)
+        conn.out += line
+        conn.out += b"\n"
+        if self.on_message_out is not None:
+            self.on_message_out(conn, now, line)
+
+    def _keep(self, msg: bytes, req: Request, version: Version, line: bytes) -> None:
+        """Keep a one-request message's answer if it is the version's to give again."""
+        robot = self.robot
+        # Not one ending in `\r`: its bytes with `\n` are another message's (`\r\n` ends one).
+        if len(msg) <= PARSE_CACHE_LINE and msg[-1:] != b"\r" and robot.version == version \
+                and robot.versioned(req):
+            answers = self._answers
+            if len(answers) >= 2 * PARSE_CACHE_SIZE:
+                answers.clear()
+            answers[msg] = answers[msg + b"\n"] = (version, msg, line)
+
     def _work(self, conn: Connection, t: float, end: float) -> None:
         """Answer queued messages request by request until `end` (at least one step).
 
@@ -554,7 +598,7 @@ class McpServer:
         """
         robot = self.robot
         request, message, parse, now = robot.request, robot.message, self._parse, self._now
-        queue, out = conn.queue, conn.out
+        queue, out, answers = conn.queue, conn.out, self._answers
         hook_in, hook_out = self.on_message_in, self.on_message_out
         turn = RequestContext(conn, t)
         while True:
@@ -583,13 +627,20 @@ class McpServer:
                 message(ctx)
                 if isinstance(msg, TooLong):
                     line = self._too_long
+                elif (kept := answers.get(msg)) is not None and kept[0] == robot.version:
+                    line = kept[2]
                 else:
                     requests, line = parse(msg)  # line: what ends the answer (an error or b"")
                     if len(requests) == 1:
+                        version = robot.version
                         try:
-                            line = request(ctx, requests[0]) + line
+                            answer = request(ctx, requests[0])
                         except Exception as exc:
                             line = self._fault(conn, exc)
+                        else:
+                            if not line:
+                                self._keep(msg, requests[0], version, answer)
+                            line = answer + line
                     elif requests:
                         conn.ctx, conn.requests, conn.index, conn.answer, conn.tail = (
                             RequestContext(conn, t), requests, 0, [], line)
