@@ -62,6 +62,10 @@ class Settings:
     rss_after_s: float
     #: Round trips: trials of each figure, interleaved with the baseline; the median is kept.
     rt_trials: int = 3
+    #: Sequential round trips: trials (each `rt_requests` long), interleaved with the
+    #: baseline's. This VM runs in phases (the same code's p50 moves by a third between
+    #: them), so the ratio is also taken per pair of neighbouring trials.
+    rt_seq_trials: int = 9
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -73,12 +77,12 @@ PROFILES = {
     # Quick means under two minutes on a 2-core machine, every section included: one trial
     # of each figure (the full run keeps three and their median), short idle windows.
     "quick": Settings("quick", 1.5, 4, 50.0, 1_000, 100, (1, 4, 8), 16, 0.5,
-                      100, 1000.0, 0.5, 1, None, 2, 2.0, 1),
+                      100, 1000.0, 0.5, 1, None, 2, 2.0, 1, 3),
     # Minimal settings for tests/unit/test_bench_smoke.py: proves the code runs, not the figures.
     # The watchdog timeout keeps 10 heartbeat periods of margin: at 0.2 s a loaded machine
     # delayed a heartbeat enough to trip the watchdog (or the relay's) while still driving.
     "smoke": Settings("smoke", 0.4, 4, 50.0, 100, 10, (1, 4, 8), 16, 0.2,
-                      8, 1000.0, 0.2, 1, 0.5, 1, 0.2, 1),
+                      8, 1000.0, 0.2, 1, 0.5, 1, 0.2, 1, 1),
 }
 
 

@@ -107,9 +107,14 @@ def render(doc: dict[str, Any]) -> str:
         out += [f"**round_trip** (`{r['request']}`, {r['response_bytes']}-byte answer; "
                 "baseline: bare select server answering the same size; client and servers "
                 f"pinned to core {r.get('pinned_cpu', '?')}, median of "
-                f"{r.get('trials', 1)} trials)", "", HEAD]
+                f"{r['sequential'].get('trials', r.get('trials', 1))} sequential and "
+                f"{r.get('trials', 1)} pipelined trials)", "", HEAD]
         out += _pcts(f"sequential ×{r['sequential']['requests']:,}: RTT", r["sequential"]["rtt_us"],
                      " µs")
+        paired = r["sequential"].get("p50_ratio_paired")
+        if paired and paired["median"] is not None:
+            out.append(f"| sequential RTT p50, trial by trial (median of {len(paired['trials'])}"
+                       f" pairs) | | | ×{paired['median']:g} |")
         pip = r["pipelined"]
         for key, v in pip.items():
             if not key.startswith("clients_"):

@@ -8,8 +8,11 @@ parsing, routing, get collection and formatting cost over moving the bytes.
 Both servers and this process (the client) are pinned to one core, as a probe running every
 process under `taskset -c N` would: the client then waits in `recv` while the server runs,
 and no figure includes waking another core (about 50 µs per hop on this VM). Each figure is
-measured `rt_trials` times, RAMP and baseline alternating, and the median trial is reported,
-so a neighbour's burst hits one trial of one side, not the figure. The supervisor's own tick
+measured `rt_trials` times (the sequential one `rt_seq_trials` times), RAMP and baseline
+alternating, and the median trial is reported, so a neighbour's burst hits one trial of one
+side, not the figure. The sequential p50 is also compared trial by trial
+(`p50_ratio_paired`): this VM runs in phases in which the same code's p50 moves by a third,
+and a pair of neighbouring trials shares its phase. The supervisor's own tick
 lateness during each pipelined phase comes from its lateness samples.
 """
 
@@ -130,9 +133,9 @@ def measure(ports: dict[str, int], settings: Settings) -> dict[str, dict[str, An
     seq: dict[str, list[dict[str, Any]]] = {name: [] for name in ports}
     piped: dict[str, dict[int, list[dict[str, Any]]]] = {
         name: {n: [] for n in settings.tp_clients} for name in ports}
-    for trial in range(settings.rt_trials):
-        for name, port in ports.items():
-            progress(f"round_trip: {name}, trial {trial + 1}/{settings.rt_trials}: "
+    for trial in range(settings.rt_seq_trials):
+        for name, port in (ports.items() if trial % 2 == 0 else reversed(ports.items())):
+            progress(f"round_trip: {name}, trial {trial + 1}/{settings.rt_seq_trials}: "
                      f"{settings.rt_requests} sequential requests")
             seq[name].append(summary(sequential(port, settings.rt_requests,
                                                 settings.rt_warmup)))
@@ -147,7 +150,8 @@ def measure(ports: dict[str, int], settings: Settings) -> dict[str, dict[str, An
                 time.sleep(0.1)  # let the server see the previous clients' close
     out: dict[str, dict[str, Any]] = {}
     for name in ports:
-        figs: dict[str, Any] = {"sequential_rtt_us": median_of(seq[name])}
+        figs: dict[str, Any] = {"sequential_rtt_us": median_of(seq[name]),
+                                "sequential_p50_us": [r["p50"] for r in seq[name]]}
         for n, runs in piped[name].items():
             by_rate = sorted(runs, key=lambda r: r["req_per_s"])
             middle = by_rate[len(by_rate) // 2]
@@ -159,6 +163,13 @@ def measure(ports: dict[str, int], settings: Settings) -> dict[str, dict[str, An
             }
         out[name] = figs
     return out
+
+
+def paired_ratio(values: list[float], baselines: list[float]) -> dict[str, Any]:
+    """The p50 ratio of each trial against the baseline's trial beside it, and their median:
+    a phase of the machine (both slower for a while) cancels out in each pair."""
+    ratios = sorted(round(v / b, 3) for v, b in zip(values, baselines, strict=True) if b)
+    return {"median": ratios[len(ratios) // 2] if ratios else None, "trials": ratios}
 
 
 def run(settings: Settings, workdir: Path) -> dict[str, Any]:
@@ -192,8 +203,10 @@ def run(settings: Settings, workdir: Path) -> dict[str, Any]:
         "baseline": {"what": "bare select.select line server answering each line with "
                              f"{response_bytes} bytes",
                      "sequential_rtt_us": base["sequential_rtt_us"]},
-        "sequential": {"requests": settings.rt_requests,
-                       "rtt_us": versus(ramp["sequential_rtt_us"], base["sequential_rtt_us"])},
+        "sequential": {"requests": settings.rt_requests, "trials": settings.rt_seq_trials,
+                       "rtt_us": versus(ramp["sequential_rtt_us"], base["sequential_rtt_us"]),
+                       "p50_ratio_paired": paired_ratio(ramp["sequential_p50_us"],
+                                                        base["sequential_p50_us"])},
         "pipelined": {"in_flight_per_client": settings.tp_in_flight,
                       "duration_s": settings.tp_duration_s},
     }
