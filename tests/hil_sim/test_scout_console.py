@@ -63,7 +63,12 @@ def test_the_arm_plugin_is_on_the_console_and_moves_from_it(
                 gauge = page.locator('[data-gauge="base:battery.volt"] .gauge-volts')
                 expect(gauge).to_have_text(re.compile(r"^12\.\d\d V · (9\d|100) %$"),
                                            timeout=5000)
-                expect(page.get_by_test_id("alert")).to_have_count(0)
+                alerts = page.get_by_test_id("alert")
+                try:
+                    expect(alerts).to_have_count(0)
+                except AssertionError as exc:  # say which alert it was
+                    raise AssertionError(f"alerts on a robot at rest: "
+                                         f"{alerts.all_inner_texts()}") from exc
                 with McpClient(*scout, timeout=5.0) as mcp:
                     box = page.get_by_test_id("call:arm:shoulder.pos")
                     box.fill("45")
