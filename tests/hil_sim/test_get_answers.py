@@ -115,6 +115,21 @@ def test_a_known_message_that_ends_a_held_line_is_that_line(marte: SimHarness) -
     assert c.ask("base:base.get=()\r") == known
 
 
+def test_a_known_message_read_before_its_newline_waits_for_it(marte: SimHarness) -> None:
+    """A read of a kept message without its `\n` is an unended line, not the message: the
+    answer comes once, when the `\n` arrives, and the next answers stay in step."""
+    c = marte.connect()
+    known = c.ask("base:base.get=()")
+    assert c.ask("base:base.get=()") == known
+    c.send("base:base.get=()")
+    _until_held(marte)
+    assert c.buf == b""
+    c.send("\n")
+    assert c.line() == known
+    assert c.ask("base:lf_wheel.vel=(30)") == ""
+    assert rows(c.ask("base:base.get=()"))["base:lf_wheel.vel"] == "30"
+
+
 def test_messages_read_together_are_given_the_answers_of_their_moment(
         marte: SimHarness) -> None:
     c = marte.connect()

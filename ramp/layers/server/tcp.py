@@ -159,9 +159,11 @@ class McpServer:
         #: Parsed short messages by their bytes: parsing is a pure function of them, and a
         #: client repeats the same few lines (a poll, a heartbeat) thousands of times.
         self._parsed: dict[bytes, tuple[tuple[Request, ...], bytes]] = {}
-        #: Answers to give again (`_keep`), by the message's bytes, and by them with their
-        #: `\n` as one read brings a whole message (no message holds a `\n`: no clash).
+        #: Answers to give again (`_keep`), by the message's bytes (a message taken from the
+        #: splitter), and by them with their `\n` (one read bringing exactly that message,
+        #: ended): two tables, so a read of a message not yet ended is never answered.
         self._answers: dict[bytes, KeptAnswer] = {}
+        self._answers_read: dict[bytes, KeptAnswer] = {}
         #: Mutual TLS (SPEC 13): the robot's context, None for plain TCP only.
         self.tls = tls
         self.access = access if access is not None else AccessConfig()
@@ -530,7 +532,7 @@ class McpServer:
             if not data:
                 self._end_input(conn)
                 return
-            again = self._answers.get(data)
+            again = self._answers_read.get(data)
             if again is not None and again[0] == self.robot.version and conn.splitter.empty:
                 self._answer_again(conn, now, again)
             else:
@@ -583,10 +585,11 @@ class McpServer:
         # Not one ending in `\r`: its bytes with `\n` are another message's (`\r\n` ends one).
         if len(msg) <= PARSE_CACHE_LINE and msg[-1:] != b"\r" and robot.version == version \
                 and robot.versioned(req):
-            answers = self._answers
-            if len(answers) >= 2 * PARSE_CACHE_SIZE:
+            answers, answers_read = self._answers, self._answers_read
+            if len(answers) >= PARSE_CACHE_SIZE:
                 answers.clear()
-            answers[msg] = answers[msg + b"\n"] = (version, msg, line)
+                answers_read.clear()
+            answers[msg] = answers_read[msg + b"\n"] = (version, msg, line)
 
     def _work(self, conn: Connection, t: float, end: float) -> None:
         """Answer queued messages request by request until `end` (at least one step).
